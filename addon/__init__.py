@@ -1,0 +1,1 @@
+"""Everything that imports bpy: properties, operators, panels, scene <-> core conversion."""

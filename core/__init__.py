@@ -1,0 +1,1 @@
+"""Pure numerics of Zoopraxis: numpy, scipy and OpenCV only, never bpy or mathutils."""

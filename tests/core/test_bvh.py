@@ -1,0 +1,533 @@
+"""BVH reading, forward kinematics, world conversion, resampling and the standard joints."""
+
+import functools
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from zoopraxis.core import bvh
+from zoopraxis.core.errors import ZoopraxisError
+from zoopraxis.core.joints import JOINT_INDEX, STANDARD_JOINTS
+
+# A root with 6 channels, a child with ZXY and a grandchild with XYZ channels.
+CHAIN = """\
+HIERARCHY
+ROOT Hips
+{
+  OFFSET 0 0 0
+  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
+  JOINT Knee
+  {
+    OFFSET 0 1 0
+    CHANNELS 3 Zrotation Xrotation Yrotation
+    JOINT Ankle
+    {
+      OFFSET 0 1 0
+      CHANNELS 3 Xrotation Yrotation Zrotation
+      End Site
+      {
+        OFFSET 0 0 2
+      }
+    }
+  }
+}
+MOTION
+Frames: 2
+Frame Time: 0.0083333
+1 2 3 90 0 0 0 90 0 0 0 0
+0 0 0 0 0 0 0 0 0 0 0 0
+"""
+
+
+def one_joint(channels, values):
+    """A root at the origin with the given channels and one frame, child at (0, 1, 0)."""
+    return bvh.parse_bvh(
+        f"HIERARCHY\nROOT A\n{{\n OFFSET 0 0 0\n CHANNELS {len(channels)} {' '.join(channels)}\n"
+        " End Site\n {\n  OFFSET 0 1 0\n }\n}\n"
+        f"MOTION\nFrames: 1\nFrame Time: 0.1\n{' '.join(map(str, values))}\n")
+
+
+def write(tmp_path, text, name="bad.bvh"):
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def random_motion(rng, frames=5):
+    """CHAIN's skeleton with random angles and root positions."""
+    motion = bvh.parse_bvh(CHAIN)
+    data = rng.uniform(-180, 180, (frames, motion.data.shape[1]))
+    data[:, :3] = rng.normal(size=(frames, 3))
+    return bvh.Motion(motion.names, motion.parents, motion.offsets, motion.channels,
+                      motion.end_sites, motion.frame_time, data)
+
+
+# ---------------------------------------------------------------------------------------
+# Reading
+
+
+class TestRead:
+    def test_hierarchy(self, tmp_path):
+        motion = bvh.read_bvh(write(tmp_path, CHAIN, "chain.bvh"))
+        assert motion.names == ["Hips", "Knee", "Ankle"]
+        assert motion.parents.tolist() == [-1, 0, 1]
+        np.testing.assert_array_equal(motion.offsets, [[0, 0, 0], [0, 1, 0], [0, 1, 0]])
+        assert motion.channels[0] == ("Xposition", "Yposition", "Zposition",
+                                      "Zrotation", "Xrotation", "Yrotation")
+        assert motion.channels[2] == ("Xrotation", "Yrotation", "Zrotation")
+        assert list(motion.end_sites) == ["Ankle"]
+        np.testing.assert_array_equal(motion.end_sites["Ankle"], [0, 0, 2])
+        assert motion.source.endswith("chain.bvh")
+
+    def test_motion_block(self):
+        motion = bvh.parse_bvh(CHAIN)
+        assert motion.data.shape == (2, 12)
+        assert motion.num_frames == 2
+        np.testing.assert_array_equal(motion.data[0, :4], [1, 2, 3, 90])
+        assert motion.frame_time == pytest.approx(0.0083333)
+        assert motion.fps == 120.0  # .0083333 is 120 fps written with 7 decimals
+
+    def test_fps_not_snapped_when_far_from_integer(self):
+        motion = bvh.parse_bvh(CHAIN.replace("0.0083333", "0.0333667"))
+        assert motion.fps == pytest.approx(29.97, abs=1e-3)
+
+    def test_zero_frames(self):
+        text = CHAIN.split("Frames:")[0] + "Frames: 0\nFrame Time: 0.01\n"
+        assert bvh.parse_bvh(text).data.shape == (0, 12)
+
+    def test_channel_names_any_case_and_tabs(self):
+        motion = bvh.parse_bvh(CHAIN.replace("Xrotation Yrotation Zrotation",
+                                             "XROTATION\tyrotation  Zrotation"))
+        assert motion.channels[2] == ("Xrotation", "Yrotation", "Zrotation")
+
+
+class TestReadErrors:
+    def test_bad_keyword(self, tmp_path):
+        path = write(tmp_path, CHAIN.replace("    JOINT Ankle", "    JOINTS Ankle"))
+        with pytest.raises(ZoopraxisError,
+                           match=r"bad\.bvh:10: unexpected 'JOINTS' in joint 'Knee'"):
+            bvh.read_bvh(path)
+
+    def test_missing_hierarchy(self, tmp_path):
+        path = write(tmp_path, CHAIN.replace("HIERARCHY", "HIERARCY"))
+        with pytest.raises(ZoopraxisError, match=r"bad\.bvh:1: expected 'HIERARCHY'"):
+            bvh.read_bvh(path)
+
+    def test_wrong_number_of_values(self, tmp_path):
+        path = write(tmp_path, CHAIN.replace("0 0 0 0 0 0 0 0 0 0 0 0\n",
+                                             "0 0 0 0 0 0 0 0 0 0 0\n"))
+        with pytest.raises(ZoopraxisError,
+                           match=r"bad\.bvh:25: frame 1 has 11 values.* 12 channels"):
+            bvh.read_bvh(path)
+
+    def test_compensating_line_lengths_are_caught(self, tmp_path):
+        text = CHAIN.replace("1 2 3 90 0 0 0 90 0 0 0 0\n0 0 0 0 0 0 0 0 0 0 0 0\n",
+                             "1 2 3 90 0 0 0 90 0 0 0 0 7\n0 0 0 0 0 0 0 0 0 0 0\n")
+        with pytest.raises(ZoopraxisError, match=r"bad\.bvh:24: frame 0 has 13 values"):
+            bvh.read_bvh(write(tmp_path, text))
+
+    def test_missing_motion(self, tmp_path):
+        path = write(tmp_path, CHAIN.split("MOTION")[0])
+        with pytest.raises(ZoopraxisError, match=r"bad\.bvh:\d+: missing MOTION"):
+            bvh.read_bvh(path)
+
+    def test_not_a_number(self, tmp_path):
+        path = write(tmp_path, CHAIN.replace("1 2 3 90", "1 2 x 90"))
+        with pytest.raises(ZoopraxisError, match=r"bad\.bvh:24: frame 0 has 'x', not a number"):
+            bvh.read_bvh(path)
+
+    def test_too_few_frame_lines(self, tmp_path):
+        path = write(tmp_path, CHAIN.replace("Frames: 2", "Frames: 3"))
+        with pytest.raises(ZoopraxisError, match=r"bad\.bvh:\d+: 'Frames: 3' but the file has 2"):
+            bvh.read_bvh(path)
+
+    def test_bad_frame_time(self, tmp_path):
+        path = write(tmp_path, CHAIN.replace("Frame Time: 0.0083333", "Frame Time: fast"))
+        with pytest.raises(ZoopraxisError, match=r"bad\.bvh:23: expected 'Frame Time"):
+            bvh.read_bvh(path)
+
+    def test_unknown_channel(self, tmp_path):
+        path = write(tmp_path, CHAIN.replace("Zrotation Xrotation Yrotation\n    JOINT",
+                                             "Zrotation Xrotation Wrotation\n    JOINT"))
+        with pytest.raises(ZoopraxisError, match=r"bad\.bvh:9: unknown channel 'Wrotation'"):
+            bvh.read_bvh(path)
+
+    def test_bad_offset(self, tmp_path):
+        path = write(tmp_path, CHAIN.replace("OFFSET 0 0 2", "OFFSET 0 0"))
+        with pytest.raises(ZoopraxisError, match=r"bad\.bvh:17: OFFSET of the End Site of 'Ankle'"):
+            bvh.read_bvh(path)
+
+    def test_unclosed_joint(self, tmp_path):
+        path = write(tmp_path, CHAIN.replace("}\nMOTION", "MOTION"))
+        with pytest.raises(ZoopraxisError, match=r"bad\.bvh:\d+: unexpected end of HIERARCHY"):
+            bvh.read_bvh(path)
+
+    def test_duplicate_joint(self, tmp_path):
+        path = write(tmp_path, CHAIN.replace("JOINT Ankle", "JOINT Knee"))
+        with pytest.raises(ZoopraxisError, match=r"bad\.bvh:10: duplicate joint name 'Knee'"):
+            bvh.read_bvh(path)
+
+    def test_missing_file(self, tmp_path):
+        with pytest.raises(ZoopraxisError, match=r"nope\.bvh: cannot read"):
+            bvh.read_bvh(tmp_path / "nope.bvh")
+
+
+# ---------------------------------------------------------------------------------------
+# Euler angles and forward kinematics
+
+
+class TestRotations:
+    def test_single_axis_is_right_handed(self):
+        # Rz(90) takes +Y to -X.
+        np.testing.assert_allclose(one_joint(["Zrotation"], [90]).end_site_position("A"),
+                                   [[-1, 0, 0]], atol=1e-12)
+
+    def test_channel_order_zxy(self):
+        # Rz(90) @ Rx(90) @ (0, 1, 0) = Rz(90) @ (0, 0, 1) = (0, 0, 1)
+        motion = one_joint(["Zrotation", "Xrotation", "Yrotation"], [90, 90, 0])
+        np.testing.assert_allclose(motion.end_site_position("A"), [[0, 0, 1]], atol=1e-12)
+
+    def test_channel_order_xzy(self):
+        # Rx(90) @ Rz(90) @ (0, 1, 0) = Rx(90) @ (-1, 0, 0) = (-1, 0, 0)
+        motion = one_joint(["Xrotation", "Zrotation", "Yrotation"], [90, 90, 0])
+        np.testing.assert_allclose(motion.end_site_position("A"), [[-1, 0, 0]], atol=1e-12)
+
+    @pytest.mark.parametrize("order", ["ZXY", "XYZ", "ZYX", "YXZ"])
+    def test_intrinsic_matches_scipy(self, rng, order):
+        angles = rng.uniform(-180, 180, (7, 3))
+        text = (f"HIERARCHY\nROOT A\n{{\nOFFSET 0 0 0\nCHANNELS 3 "
+                + " ".join(a + "rotation" for a in order)
+                + "\n}\nMOTION\nFrames: 7\nFrame Time: 0.1\n"
+                + "\n".join(" ".join(map(repr, row)) for row in angles) + "\n")
+        expected = Rotation.from_euler(order, angles, degrees=True).as_matrix()
+        np.testing.assert_allclose(bvh.parse_bvh(text).local_rotations()[:, 0], expected,
+                                   atol=1e-12)
+
+    def test_joint_without_rotation_channels_is_identity(self):
+        motion = one_joint(["Xposition", "Yposition", "Zposition"], [1, 2, 3])
+        np.testing.assert_array_equal(motion.local_rotations()[0, 0], np.eye(3))
+
+
+class TestForwardKinematics:
+    def test_chain_by_hand(self):
+        motion = bvh.parse_bvh(CHAIN)
+        # Frame 0: root at (1, 2, 3) turned Rz(90); the knee turns Rx(90).
+        # knee  = (1, 2, 3) + Rz90 (0, 1, 0)             = (0, 2, 3)
+        # ankle = knee + Rz90 Rx90 (0, 1, 0) = + (0, 0, 1) = (0, 2, 4)
+        # tip   = ankle + Rz90 Rx90 (0, 0, 2) = + (2, 0, 0) = (2, 2, 4)
+        np.testing.assert_allclose(motion.positions(0)[0], [[1, 2, 3], [0, 2, 3], [0, 2, 4]],
+                                   atol=1e-12)
+        np.testing.assert_allclose(motion.end_site_position("Ankle", 0), [[2, 2, 4]], atol=1e-12)
+        # Frame 1: rest pose.
+        np.testing.assert_allclose(motion.positions(1)[0], [[0, 0, 0], [0, 1, 0], [0, 2, 0]])
+        np.testing.assert_allclose(motion.root_positions(), [[1, 2, 3], [0, 0, 0]])
+
+    def test_shapes_and_frame_selection(self, rng):
+        motion = random_motion(rng, frames=6)
+        assert motion.local_rotations().shape == (6, 3, 3, 3)
+        assert motion.global_transforms().shape == (6, 3, 4, 4)
+        assert motion.positions(slice(1, 4)).shape == (3, 3, 3)
+        assert motion.end_site_position("Ankle", [0, 5]).shape == (2, 3)
+        np.testing.assert_allclose(motion.positions([4, 2]), motion.positions()[[4, 2]])
+        np.testing.assert_allclose(motion.positions(3), motion.positions()[3:4])
+
+    def test_transforms_are_rigid(self, rng):
+        transforms = random_motion(rng).global_transforms()
+        rotations = transforms[..., :3, :3]
+        np.testing.assert_allclose(rotations @ np.swapaxes(rotations, -1, -2),
+                                   np.broadcast_to(np.eye(3), rotations.shape), atol=1e-12)
+        np.testing.assert_allclose(np.linalg.det(rotations), 1.0)
+        np.testing.assert_array_equal(transforms[..., 3, :], np.broadcast_to([0, 0, 0, 1],
+                                                                             transforms.shape[:-1]))
+
+    def test_bone_lengths_constant(self, rng):
+        positions = random_motion(rng, frames=20).positions()
+        np.testing.assert_allclose(np.linalg.norm(positions[:, 2] - positions[:, 1], axis=-1), 1.0)
+
+    def test_position_channels_add_to_offset(self):
+        text = CHAIN.replace("CHANNELS 6 Xposition Yposition Zposition",
+                             "CHANNELS 6 Zposition Xposition Yposition")
+        np.testing.assert_allclose(bvh.parse_bvh(text).root_positions()[0], [2, 3, 1])
+
+    def test_end_site_of_joint_without_one(self):
+        with pytest.raises(ZoopraxisError, match="joint 'Knee' has no End Site"):
+            bvh.parse_bvh(CHAIN).end_site_position("Knee")
+
+    def test_unknown_joint(self):
+        with pytest.raises(ZoopraxisError, match="<string>: no joint named 'Elbow'"):
+            bvh.parse_bvh(CHAIN).joint_index("Elbow")
+
+
+# ---------------------------------------------------------------------------------------
+# World conversion
+
+
+class TestToWorld:
+    def test_y_up_rotates_positions(self, rng):
+        motion = random_motion(rng)
+        world = motion.to_world(0.5, up="y")
+        x, y, z = np.moveaxis(motion.positions(), -1, 0)
+        np.testing.assert_allclose(world.positions(), 0.5 * np.stack([x, -z, y], axis=-1),
+                                   atol=1e-12)
+        x, y, z = motion.end_site_position("Ankle").T
+        np.testing.assert_allclose(world.end_site_position("Ankle"),
+                                   0.5 * np.stack([x, -z, y], axis=-1), atol=1e-12)
+
+    def test_y_up_conjugates_rotations(self, rng):
+        motion = random_motion(rng)
+        world_from_file = np.array([[1, 0, 0], [0, 0, -1], [0, 1, 0]])
+        expected = world_from_file @ motion.global_transforms()[..., :3, :3] @ world_from_file.T
+        np.testing.assert_allclose(motion.to_world(1.0).global_transforms()[..., :3, :3],
+                                   expected, atol=1e-12)
+
+    def test_channels_are_relabelled(self):
+        world = bvh.parse_bvh(CHAIN).to_world(2.0)
+        assert world.channels[0] == ("Xposition", "Zposition", "Yposition",
+                                     "Yrotation", "Xrotation", "Zrotation")
+        np.testing.assert_allclose(world.data[0, :4], [2, 4, -6, -90])
+        np.testing.assert_allclose(world.offsets[1], [0, 0, 2])
+        assert world.space == "world"
+
+    def test_z_up_only_scales(self, rng):
+        motion = random_motion(rng)
+        np.testing.assert_allclose(motion.to_world(3.0, up="z").positions(),
+                                   3.0 * motion.positions(), atol=1e-12)
+
+    def test_once_only(self):
+        world = bvh.parse_bvh(CHAIN).to_world(1.0)
+        with pytest.raises(ZoopraxisError, match="already in world space"):
+            world.to_world(1.0)
+
+    def test_bad_up_axis(self):
+        with pytest.raises(ZoopraxisError, match="unsupported up axis 'x'"):
+            bvh.parse_bvh(CHAIN).to_world(1.0, up="x")
+
+
+# ---------------------------------------------------------------------------------------
+# Resampling
+
+
+def spinning_motion(fps, seconds):
+    """One joint turning at a constant rate about a tilted axis, Euler ZXY channels."""
+    times = np.arange(int(round(seconds * fps)) + 1) / fps
+    axis = np.array([0.3, 1.0, -0.5]) / np.linalg.norm([0.3, 1.0, -0.5])
+    rotations = Rotation.from_rotvec(np.outer(times * 4.0, axis))  # 4 rad/s: Euler wraps
+    angles = np.unwrap(rotations.as_euler("ZXY", degrees=True), period=360, axis=0)
+    data = np.hstack([np.outer(times, [1.0, -2.0, 0.5]), angles])
+    motion = bvh.Motion(["A"], [-1], [[0, 0, 0]],
+                        [("Xposition", "Yposition", "Zposition",
+                          "Zrotation", "Xrotation", "Yrotation")],
+                        {"A": [0, 1, 0]}, 1.0 / fps, data)
+    return motion, axis
+
+
+class TestResample:
+    def test_integer_ratio_takes_every_kth_frame(self, rng):
+        motion = random_motion(rng, frames=10)
+        slow = motion.resampled(40)
+        assert slow.num_frames == 4 and slow.fps == 40.0
+        np.testing.assert_array_equal(slow.data, motion.data[::3])
+
+    def test_fractional_ratio_slerps(self):
+        motion, axis = spinning_motion(120, 1.0)
+        out = motion.resampled(50)
+        assert out.num_frames == 51 and out.fps == 50.0
+        times = np.arange(51) / 50
+        truth = Rotation.from_rotvec(np.outer(times * 4.0, axis)).as_matrix()
+        np.testing.assert_allclose(out.local_rotations()[:, 0], truth, atol=1e-9)
+        np.testing.assert_allclose(out.root_positions(), np.outer(times, [1.0, -2.0, 0.5]),
+                                   atol=1e-12)
+
+    def test_fractional_ratio_keeps_euler_continuous(self):
+        motion, _ = spinning_motion(120, 2.0)
+        angles = motion.resampled(50).data[:, 3:]
+        # 4 rad/s at 50 fps turns 4.6 degrees a frame; a 360 jump would show.
+        assert np.abs(np.diff(angles, axis=0)).max() < 20.0
+
+    def test_bad_rate(self):
+        with pytest.raises(ZoopraxisError, match="cannot resample to 0 fps"):
+            bvh.parse_bvh(CHAIN).resampled(0)
+
+
+# ---------------------------------------------------------------------------------------
+# Standard joints on a tiny skeleton
+
+
+class TestStandardJointsErrors:
+    def test_requires_world_space(self):
+        with pytest.raises(ZoopraxisError, match="convert the motion with to_world"):
+            bvh.standard_joints(bvh.parse_bvh(CHAIN))
+
+    def test_wrong_skeleton(self):
+        with pytest.raises(ZoopraxisError, match="<string>: not a 'cmu' skeleton"):
+            bvh.standard_joints(bvh.parse_bvh(CHAIN).to_world(1.0))
+
+    def test_unknown_skeleton(self):
+        with pytest.raises(ZoopraxisError, match="unknown skeleton 'h36m'"):
+            bvh.standard_joints(bvh.parse_bvh(CHAIN).to_world(1.0), skeleton="h36m")
+
+    def test_rules_cover_all_standard_joints(self):
+        for rules in bvh.SKELETONS.values():
+            assert set(rules) == set(STANDARD_JOINTS)
+
+
+# ---------------------------------------------------------------------------------------
+# The CMU captures
+
+
+# Parsed once per test session: the fixtures below only look the results up.
+@functools.lru_cache(maxsize=None)
+def _load(path, fps=None):
+    return bvh.load_cmu(path, fps)
+
+
+@functools.lru_cache(maxsize=None)
+def _standard_joints(path, fps=None):
+    return bvh.standard_joints(_load(path, fps))
+
+
+@pytest.fixture
+def walk_path(shared_data):
+    return str(shared_data / "cmu_mocap" / "131_01.bvh")
+
+
+@pytest.fixture
+def walk(walk_path):
+    return _load(walk_path)
+
+
+@pytest.fixture
+def walk_joints(walk_path):
+    return _standard_joints(walk_path)
+
+
+@pytest.fixture
+def playground(shared_data):
+    return _load(str(shared_data / "cmu_mocap" / "01_01.bvh"))
+
+
+def J(name):
+    return JOINT_INDEX[name]
+
+
+def facing_from_hips(joints):
+    """Horizontal unit facing per frame: forward = left x up for a right-handed body."""
+    left = joints[:, J("l_hip")] - joints[:, J("r_hip")]
+    forward = np.cross(left, [0.0, 0.0, 1.0])
+    return forward / np.linalg.norm(forward, axis=-1, keepdims=True)
+
+
+class TestCmuFile:
+    def test_header_and_hierarchy(self, walk):
+        assert walk.fps == 120.0
+        assert walk.num_frames == 994
+        assert walk.num_joints == 31
+        assert walk.names[:6] == ["Hips", "LHipJoint", "LeftHip", "LeftKnee", "LeftAnkle",
+                                  "LeftToe"]
+        assert walk.parents[walk.names.index("LeftKnee")] == walk.names.index("LeftHip")
+        # 131 writes the arms Z X Y and everything else Z Y X.
+        elbow = walk.channels[walk.names.index("LeftElbow")]
+        assert elbow == ("Yrotation", "Xrotation", "Zrotation")
+        assert walk.channels[walk.names.index("Neck")] == ("Yrotation", "Zrotation", "Xrotation")
+
+    def test_both_cmu_namings_map(self, walk_joints, playground):
+        assert walk_joints.shape == (994, 17, 3)
+        assert bvh.standard_joints(playground, frames=slice(0, 3)).shape == (3, 17, 3)
+
+
+class TestCmuGeometry:
+    def test_height(self, walk, walk_joints, playground):
+        # Stature to the head's End Site above the floor (lowest toe of the take).
+        for motion, joints, low, high in ((walk, walk_joints, 1.3, 1.6),
+                                          (playground, None, 1.5, 2.0)):
+            if joints is None:
+                joints = bvh.standard_joints(motion, frames=slice(0, None, 10))
+                top = motion.end_site_position("Head", slice(0, None, 10))
+            else:
+                top = motion.end_site_position("Head")
+            floor = joints[:, [J("l_toe"), J("r_toe")], 2].min()
+            assert low < np.median(top[:, 2]) - floor < high
+
+    def test_z_is_up(self, walk_joints):
+        head, pelvis = walk_joints[:, J("head"), 2], walk_joints[:, J("pelvis"), 2]
+        ankles = walk_joints[:, [J("l_ankle"), J("r_ankle")], 2]
+        # 131_01 dips to a deep crouch near 3 s (pelvis 0.40 m up), hence the margins.
+        assert np.all(head > pelvis + 0.2)
+        assert np.all(pelvis[:, None] > ankles + 0.2)
+
+    def test_floor_near_zero(self, walk_joints):
+        toes = walk_joints[:, [J("l_toe"), J("r_toe")], 2]
+        assert 0.0 < toes.min() < 0.05
+
+    def test_thigh_is_rigid(self, walk_joints):
+        for side in "lr":
+            thigh = walk_joints[:, J(f"{side}_knee")] - walk_joints[:, J(f"{side}_hip")]
+            length = np.linalg.norm(thigh, axis=-1)
+            assert 0.35 < length.mean() < 0.5
+            assert length.std() < 1e-3
+
+    def test_neck_between_shoulders(self, walk_joints):
+        shoulders = walk_joints[:, [J("l_shoulder"), J("r_shoulder")]].mean(axis=1)
+        assert np.linalg.norm(walk_joints[:, J("neck")] - shoulders, axis=-1).max() < 0.04
+
+    def test_head_centre_above_neck(self, walk_joints):
+        # Neck to Head is 9 cm, Head to its End Site (crown) 9 cm; the centre is half-way.
+        rise = walk_joints[:, J("head"), 2] - walk_joints[:, J("neck"), 2]
+        assert 0.1 < np.median(rise) < 0.2
+        assert np.all(rise > 0.0)
+
+
+class TestCmuMotion:
+    def test_walk_progresses(self, walk_joints):
+        pelvis = walk_joints[:, J("pelvis")]
+        assert np.linalg.norm(pelvis[-1, :2] - pelvis[0, :2]) > 1.0
+
+    def test_left_is_subjects_left(self, walk_joints, playground):
+        # With left and right swapped, the hips would say the subject faces backwards:
+        # against the feet (ankle -> toe) and against the walk.
+        walk_direction = walk_joints[-1, J("pelvis")] - walk_joints[0, J("pelvis")]
+        walk_direction[2] = 0
+        walk_direction /= np.linalg.norm(walk_direction)
+        assert facing_from_hips(walk_joints)[0] @ walk_direction > 0.9
+        for joints in (walk_joints, bvh.standard_joints(playground, frames=slice(0, None, 10))):
+            facing = facing_from_hips(joints)
+            feet = (joints[:, [J("l_toe"), J("r_toe")]]
+                    - joints[:, [J("l_ankle"), J("r_ankle")]]).sum(axis=1)
+            feet[:, 2] = 0
+            feet /= np.linalg.norm(feet, axis=-1, keepdims=True)
+            assert facing[0] @ feet[0] > 0.9
+            assert np.mean(np.sum(facing * feet, axis=-1) > 0.7) > 0.95
+
+    def test_walks_towards_minus_y(self, walk_joints):
+        walk_direction = walk_joints[-1, J("pelvis"), :2] - walk_joints[0, J("pelvis"), :2]
+        assert walk_direction[1] / np.linalg.norm(walk_direction) < -0.95
+
+    def test_stance_toes_stay_put(self, walk_joints, walk):
+        # The intrinsic Euler order keeps planted feet still; the reversed (extrinsic)
+        # order slides the right toe at ~0.75 m/s on this take.
+        for side in "lr":
+            toe = walk_joints[:, J(f"{side}_toe")]
+            speed = np.linalg.norm(np.diff(toe[:, :2], axis=0), axis=-1) * walk.fps
+            planted = toe[:-1, 2] < np.percentile(toe[:, 2], 20)
+            assert np.median(speed[planted]) < 0.25
+
+    def test_resample_to_30(self, walk, walk_joints, walk_path):
+        slow = _load(walk_path, 30)
+        assert slow.fps == 30.0
+        assert slow.num_frames == (walk.num_frames + 3) // 4
+        np.testing.assert_allclose(_standard_joints(walk_path, 30), walk_joints[::4], atol=1e-12)
+
+
+class TestCmuFrames:
+    def test_frames_follow_bones(self, walk, walk_joints):
+        frames = bvh.standard_joint_frames(walk)
+        np.testing.assert_allclose(frames[..., :3, 3], walk_joints, atol=1e-12)
+        rotations = frames[..., :3, :3]
+        np.testing.assert_allclose(np.linalg.det(rotations), 1.0)
+        # Each bone's far joint is fixed in the frame of the bone.
+        for start, end in (("l_hip", "l_knee"), ("r_shoulder", "r_elbow"), ("l_knee", "l_ankle")):
+            world_from_bone = frames[:, J(start)]
+            local = np.einsum("fba,fb->fa", world_from_bone[:, :3, :3],
+                              walk_joints[:, J(end)] - world_from_bone[:, :3, 3])
+            assert np.abs(local - local[0]).max() < 1e-9
