@@ -21,7 +21,10 @@ COMMANDS = {
     "info": ("cli", "info", "print the versions of Zoopraxis, Python and its dependencies"),
     "synth": ("core.cli_synth", "main",
               "render synthetic plates from motion capture, with ground truth and markers"),
+    "track": ("core.cli_track", "main",
+              "track a body through plates from clicked joints and write result.json"),
     "demo": ("core.cli_demo", "main", "run the whole pipeline on the bundled sample"),
+    "bake": ("core.cli_bake", "main", "key a tracked take onto an armature; write .blend, BVH, FBX"),
 }
 
 

@@ -463,3 +463,37 @@ def take_from_bvh(bvh_path, *, frames=None, fps=30.0, **scene_options):
 
 __all__ = ["SynthBody", "Scene", "synth_body", "make_scene", "write_take", "read_truth",
            "project_joints", "take_from_bvh", "BUILDS"]
+
+
+class ScenePlate:
+    """A view of a synthetic scene behaving like a :class:`plates.Plate`, rendered on demand.
+
+    Lets trackers and benchmarks run on synthetic takes without writing images to disk.
+    """
+
+    def __init__(self, scene, view, fps=30.0):
+        self.scene = scene
+        self.view = view
+        self.name = scene.cameras[view].name
+        self.path = f"<synthetic {self.name}>"
+        self.fps = fps
+        self.image_size = tuple(scene.cameras[view].image_size)
+        self.num_frames = scene.num_frames
+
+    def __len__(self):
+        return self.num_frames
+
+    def read(self, frame, *, gray=False, dtype=np.uint8):
+        if not 0 <= frame < self.num_frames:
+            raise ZoopraxisError(f"{self.path}: frame {frame} is outside 0-{self.num_frames - 1}")
+        image, _ = self.scene.render_frame(frame, self.view)
+        if gray:
+            image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+        if dtype == np.float32:
+            image = image.astype(np.float32) / 255.0
+        return image
+
+
+def scene_plates(scene, fps=30.0):
+    """``{view name: ScenePlate}`` for every camera of a scene."""
+    return {cam.name: ScenePlate(scene, v, fps) for v, cam in enumerate(scene.cameras)}

@@ -1,0 +1,136 @@
+"""``zoopraxis track``: plates and markers in, result.json out (DESIGN, Command line)."""
+
+import argparse
+import time
+from pathlib import Path
+
+from .errors import ZoopraxisError
+from .progress import ConsoleProgress
+
+TRACKERS = ("differential", "particle", "hybrid")
+
+
+def parse_view_values(items, what, convert=str):
+    """``["cam0=PATH", ...]`` -> ordered dict; one-line errors for malformed items."""
+    out = {}
+    for item in items or []:
+        name, sep, value = item.partition("=")
+        if not sep or not name or not value:
+            raise ZoopraxisError(f"{what} must look like VIEW=VALUE, got '{item}'")
+        if name in out:
+            raise ZoopraxisError(f"view '{name}' is given twice in {what}")
+        try:
+            out[name] = convert(value)
+        except ValueError:
+            raise ZoopraxisError(f"{what} {item}: '{value}' is not valid") from None
+    return out
+
+
+def build_parser():
+    p = argparse.ArgumentParser(
+        prog="zoopraxis track",
+        description="Track an articulated body through synchronized plates, starting from the "
+                    "joints clicked in markers.json, and write result.json.")
+    p.add_argument("--plate", action="append", required=True, metavar="VIEW=PATH",
+                   help="a plate: video file or image folder (repeat for each view)")
+    p.add_argument("--markers", required=True, help="markers.json with the clicked joints")
+    p.add_argument("--calibration", help="calibration.json or Pose2Sim/anipose TOML; without it "
+                                         "the uncalibrated (scaled orthographic) mode runs")
+    p.add_argument("--frames", help="START:END plate frames, END excluded (default: all)")
+    p.add_argument("--tracker", choices=TRACKERS, default="differential")
+    p.add_argument("--offset", action="append", metavar="VIEW=N",
+                   help="plate frame offset of a view that starts later (repeatable)")
+    p.add_argument("--template", default="full", help="body template (default full)")
+    p.add_argument("--fps", type=float, help="frame rate of image-folder plates (default 30)")
+    p.add_argument("--max-size", type=int, default=960,
+                   help="longest side of the working images, pixels (default 960)")
+    p.add_argument("--particles", type=int, default=2000,
+                   help="particles of the particle and hybrid trackers (default 2000)")
+    p.add_argument("--seed", type=int, default=2345)
+    p.add_argument("--out", required=True, help="result.json to write")
+    p.add_argument("--force", action="store_true", help="replace an existing result file")
+    return p
+
+
+def main(argv):
+    from . import calibfile, markers, plates
+    from .result import write_result
+
+    args = build_parser().parse_args(argv)
+    out = Path(args.out)
+    if out.exists() and not args.force:
+        raise ZoopraxisError(f"{out}: file exists (use --force to replace it)")
+    paths = parse_view_values(args.plate, "--plate")
+    offsets = parse_view_values(args.offset, "--offset", int)
+    unknown = [v for v in offsets if v not in paths]
+    if unknown:
+        raise ZoopraxisError(f"--offset names view '{unknown[0]}', which has no --plate")
+    opened = {v: plates.open_plate(p, name=v, fps=args.fps) for v, p in paths.items()}
+    n = plates.check_same_length(opened, offsets)
+    frames = plates.parse_frame_range(args.frames, n)
+    anchors = markers.read_markers(args.markers)
+    markers.check_markers(anchors, list(opened), n, path=args.markers)
+    cameras = None
+    if args.calibration:
+        cameras = calibfile.check_views(calibfile.read_calibration(args.calibration),
+                                        list(opened), args.calibration)
+    stop = _StopOnInterrupt()
+    kwargs = dict(frames=frames, offsets=offsets, template=args.template,
+                  max_size=args.max_size, progress=ConsoleProgress("track"), cancel=stop,
+                  log=lambda msg: print(f"track: {msg}", flush=True))
+    t0 = time.perf_counter()
+    with stop:
+        if args.tracker == "differential":
+            from .track import track
+
+            result = track(opened, anchors, cameras, **kwargs)
+        else:
+            from . import hybrid
+
+            result = hybrid.track(opened, anchors, cameras, tracker=args.tracker,
+                                  particles=args.particles, seed=args.seed, **kwargs)
+    write_result(out, result, force=args.force)
+    elapsed = time.perf_counter() - t0
+    counts = {s: result.status.count(s) for s in ("ok", "uncertain", "lost")}
+    print(f"track: {result.num_frames} frames in {elapsed:.1f} s "
+          f"({result.num_frames / max(elapsed, 1e-9):.1f} frames/s): {counts['ok']} ok, "
+          f"{counts['uncertain']} uncertain, {counts['lost']} lost -> {out}")
+    if stop.requested:
+        print(f"track: cancelled; the {result.num_frames} frames tracked are in {out}")
+        return 130
+    return 0
+
+
+class _StopOnInterrupt:
+    """Turn the first Ctrl-C into a polite stop (the tracker returns what it has done, and it
+    is written); a second Ctrl-C interrupts at once."""
+
+    def __init__(self):
+        self.requested = False
+        self._old = None
+
+    def __call__(self):
+        return self.requested
+
+    def _handle(self, signum, frame):
+        import signal
+
+        self.requested = True
+        print("track: stopping after this frame (Ctrl-C again to abort)", flush=True)
+        signal.signal(signal.SIGINT, self._old or signal.default_int_handler)
+
+    def __enter__(self):
+        import signal
+        import threading
+
+        if threading.current_thread() is threading.main_thread():
+            self._old = signal.signal(signal.SIGINT, self._handle)
+        return self
+
+    def __exit__(self, *exc):
+        import signal
+        import threading
+
+        if self._old is not None and threading.current_thread() is threading.main_thread():
+            signal.signal(signal.SIGINT, self._old)
+        return False

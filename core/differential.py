@@ -1,0 +1,448 @@
+"""Differential twist tracker: Gauss-Newton on image motion, one to eight views.
+
+From a pose at frame t and the images of t and t+1 in every view, find the pose at t+1
+(Bregler & Malik §2.5's recipe, with Yamamoto et al.'s calibrated multi-view system):
+
+1. Render the model at the pose of t in each view: support map, depth and surface points
+   (Yamamoto's region and depth images; B&M step 1-2).
+2. From the coarsest pyramid level to the finest: linearise the image-motion residuals
+   (:mod:`image_motion`), accumulate the normal equations per segment, solve for the pose
+   increment, update root and angles, re-sample ``I(t+1)`` at the moved points (the warp of step
+   4e) and iterate (Levenberg-Marquardt damping keeps every step downhill).
+3. Support maps are refined by EM against a static background layer (§2.4): a pixel that is
+   better explained by "nothing moved here" than by its segment's motion loses its weight.
+
+Two persistent cues keep the frame-to-frame motion from drifting (Yamamoto §4): appearance
+taken from the anchor frame, and the silhouette against a background model, both as residuals in
+the same least squares. Joint limits hold after every step.
+
+Calibrated views share one world pose (Yamamoto eqs. 8-12); uncalibrated views each carry their
+own scaled-orthographic pose of the body and share the joint angles (B&M eq. 28).
+"""
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from . import se3
+from .background import signed_distance, silhouette_iou
+from .body import Pose
+from .image_motion import (Accumulated, Term, accumulate, assemble, image_with_gradients,
+                           sample)
+from .render import render
+
+
+@dataclass
+class Settings:
+    """Tracker settings; the defaults suit 480x360 to 960x540 working images at 25-60 fps."""
+
+    levels: int = 3                   # pyramid levels (0 = working resolution)
+    iterations: tuple = (4, 4, 3)     # Gauss-Newton iterations per level, coarse to fine
+    stride: int = 2                   # pixel subsampling of the template at the finest level
+    max_points: int = 5000            # per view and level
+    smooth_sigma: float = 1.0         # Gaussian pre-smoothing of the grey images, pixels
+    flow_weight: float = 1.0          # frame-to-frame image motion term
+    flow_scale: float = 0.05          # robust scale of grey residuals (images in [0, 1])
+    anchor_weight: float = 0.5        # persistent appearance term
+    silhouette_weight: float = 0.002  # signed-distance term (per pixel^2, relative to grey^2)
+    silhouette_scale: float = 3.0     # robust scale of silhouette residuals, pixels
+    silhouette_margin: float = 1.0    # contour may stray this far outside the silhouette, px
+    em: bool = True                   # EM refinement of the support maps
+    velocity: float = 0.5             # fraction of the last motion used to predict the next
+    prior_weight: float = 1e-3        # pull towards the prediction, relative to the data
+    damping: float = 1e-3             # initial Levenberg-Marquardt damping
+
+
+@dataclass
+class ViewImages:
+    """One view's frame at the tracker's working resolution.
+
+    Attributes
+    ----------
+    gray : list of array (H_l, W_l) float32
+        Gaussian pyramid of the smoothed grey image, level 0 first.
+    stacks : list of array (H_l, W_l, 3) float32
+        Each level with its gradients, for sampling.
+    foreground : array of bool (H, W) or None
+        Foreground mask from the background model (None when unreliable or absent).
+    sdf : list of array (H_l, W_l, 3) or None
+        Signed distance to the foreground boundary per level, with gradients.
+    """
+
+    gray: list
+    stacks: list
+    foreground: np.ndarray = None
+    sdf: list = None
+
+
+def prepare_images(gray, levels, smooth_sigma, foreground=None):
+    """Pyramid, gradients and silhouette distance images of one frame of one view."""
+    g = np.asarray(gray, np.float32)
+    if smooth_sigma > 0:
+        g = cv2.GaussianBlur(g, (0, 0), smooth_sigma)
+    pyr = [g]
+    for _ in range(1, levels):
+        pyr.append(cv2.pyrDown(pyr[-1]))
+    stacks = [image_with_gradients(p) for p in pyr]
+    sdf = None
+    if foreground is not None:
+        sdf = []
+        m = foreground.astype(np.float32)
+        for level in range(levels):
+            if level:
+                m = cv2.pyrDown(m)
+            sdf.append(image_with_gradients(signed_distance(m > 0.5)))
+    return ViewImages(pyr, stacks, foreground, sdf)
+
+
+@dataclass
+class State:
+    """Pose of the tracked body: shared angles and one root per view.
+
+    Calibrated views all hold the same world root; uncalibrated views hold the body's pose in
+    their own camera frame, and their scaled-orthographic cameras carry the scale.
+    """
+
+    roots: np.ndarray        # (V, 4, 4)
+    angles: np.ndarray       # (n_dofs,)
+    cameras: list            # per view, at working resolution
+
+    def copy(self):
+        return State(self.roots.copy(), self.angles.copy(), list(self.cameras))
+
+    def pose(self, view=0):
+        return Pose(self.roots[view], self.angles)
+
+
+@dataclass
+class StepReport:
+    """Diagnostics of one tracked frame."""
+
+    residual: np.ndarray          # (V,) mean absolute grey residual of the flow term, 0-255
+    iou: np.ndarray               # (V,) model/foreground silhouette overlap (NaN: no mask)
+    cost: float
+    iterations: int
+    renders: list = field(default_factory=list)   # per view RenderResult at the new pose
+
+
+class DifferentialTracker:
+    """Gauss-Newton tracker over a body model and a set of views.
+
+    Parameters
+    ----------
+    body : BodyModel
+    calibrated : bool
+        True: ``State.roots`` are all the same world pose and cameras are perspective.
+        False: each view has its own root and a scaled-orthographic camera (B&M §2.3).
+    settings : Settings
+    """
+
+    def __init__(self, body, calibrated, settings=None):
+        self.body = body
+        self.calibrated = calibrated
+        self.settings = settings or Settings()
+        self.prims = body.primitives()
+        self.anchor_terms = None
+
+    # -- parameter layout ---------------------------------------------------------------------
+
+    def layout(self, n_views):
+        """Columns of each view's root twist, its scale, and the shared angles."""
+        n = self.body.n_dofs
+        if self.calibrated:
+            roots = [np.arange(6)] * n_views
+            scales = [None] * n_views
+            angles = np.arange(6, 6 + n)
+            return roots, scales, angles, 6 + n
+        roots = [np.arange(7 * c, 7 * c + 6) for c in range(n_views)]
+        scales = [7 * c + 6 for c in range(n_views)]
+        angles = np.arange(7 * n_views, 7 * n_views + n)
+        return roots, scales, angles, 7 * n_views + n
+
+    def retract(self, state, delta):
+        """Apply a parameter increment to a state, clamping the angles to the joint limits."""
+        roots_cols, scale_cols, angle_cols, _ = self.layout(len(state.cameras))
+        new = state.copy()
+        if self.calibrated:
+            root = se3.exp_se3(delta[:6]) @ state.roots[0]
+            root[:3, :3] = se3.orthonormalize(root[:3, :3])
+            new.roots[:] = root
+        else:
+            for c, cols in enumerate(roots_cols):
+                root = se3.exp_se3(delta[cols]) @ state.roots[c]
+                root[:3, :3] = se3.orthonormalize(root[:3, :3])
+                new.roots[c] = root
+                cam = state.cameras[c]
+                new.cameras[c] = cam.replace(s=cam.s * float(np.exp(delta[scale_cols[c]])))
+        new.angles = self.body.clamp(state.angles + delta[angle_cols])
+        return new
+
+    def predict(self, state, previous=None):
+        """Constant-velocity prediction, damped by ``settings.velocity``."""
+        if previous is None or self.settings.velocity == 0:
+            return state.copy()
+        k = self.settings.velocity
+        new = state.copy()
+        new.angles = self.body.clamp(state.angles + k * (state.angles - previous.angles))
+        for c in range(len(state.roots)):
+            motion = se3.log_se3(state.roots[c] @ se3.invert(previous.roots[c]))
+            new.roots[c] = se3.exp_se3(k * motion) @ state.roots[c]
+        return new
+
+    # -- terms ----------------------------------------------------------------------------------
+
+    def _camera_at(self, camera, level):
+        return camera if level == 0 else camera.scaled(0.5 ** level)
+
+    def template_terms(self, state, images_t, renders):
+        """Image-motion terms from the rendered model at frame t, per view and level.
+
+        Returns
+        -------
+        terms : list (levels) of list (views) of Term
+        """
+        s = self.settings
+        out = []
+        seg2world = [self.body.seg2world(state.pose(c)) for c in range(len(images_t))]
+        world2seg = [se3.invert(T) for T in seg2world]
+        for level in range(s.levels):
+            per_view = []
+            for c, (im, rr) in enumerate(zip(images_t, renders)):
+                step = 2 ** level
+                stride = s.stride if level == 0 else 1
+                lab = rr.label[::step * stride, ::step * stride]
+                pts = rr.point[::step * stride, ::step * stride]
+                vv, uu = np.nonzero(lab >= 0)
+                if len(vv) > s.max_points:
+                    keep = np.linspace(0, len(vv) - 1, s.max_points).astype(int)
+                    vv, uu = vv[keep], uu[keep]
+                seg = lab[vv, uu].astype(np.int64)
+                X = pts[vv, uu].astype(np.float64)
+                ref = se3.apply(world2seg[c][seg], X)
+                gray = im.gray[level]
+                gv, gu = vv * stride, uu * stride
+                gv = np.minimum(gv, gray.shape[0] - 1)
+                gu = np.minimum(gu, gray.shape[1] - 1)
+                target = gray[gv, gu].astype(np.float64)
+                weight = np.ones(len(seg))
+                if im.foreground is not None:
+                    # A model pixel the background model calls background is likely not body:
+                    # start the EM from a low prior there.
+                    fg = im.foreground[vv * step * stride, uu * step * stride]
+                    weight = np.where(fg, 1.0, 0.25)
+                uv = np.column_stack([gu, gv]).astype(np.float64)
+                per_view.append(Term(c, seg, ref, target, weight, s.flow_scale, "flow", uv))
+            out.append(per_view)
+        return out
+
+    def contour_terms(self, state, renders):
+        """Silhouette terms: model contour points should land on the observed boundary."""
+        terms = []
+        for c, rr in enumerate(renders):
+            lab = rr.label
+            fgm = lab >= 0
+            eroded = cv2.erode(fgm.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+            vv, uu = np.nonzero(fgm & ~eroded)
+            if len(vv) > 1500:
+                keep = np.linspace(0, len(vv) - 1, 1500).astype(int)
+                vv, uu = vv[keep], uu[keep]
+            seg = lab[vv, uu].astype(np.int64)
+            X = rr.point[vv, uu].astype(np.float64)
+            T = self.body.seg2world(state.pose(c))
+            ref = se3.apply(se3.invert(T)[seg], X)
+            terms.append(Term(c, seg, ref, np.zeros(len(seg)), np.ones(len(seg)),
+                              self.settings.silhouette_scale, "silhouette",
+                              hinge=self.settings.silhouette_margin))
+        return terms
+
+    def set_anchor(self, state, images, renders):
+        """Keep the appearance of an anchor frame as a persistent template (per view).
+
+        Stored per level as terms whose targets are the anchor's grey levels; they are checked
+        against occlusion at every frame.
+        """
+        self.anchor_terms = self.template_terms(state, images, renders)
+        for per_view in self.anchor_terms:
+            for t in per_view:
+                t.name = "anchor"
+
+    # -- rendering -------------------------------------------------------------------------------
+
+    def render_views(self, state, want=("point",)):
+        return [render(cam, self.body.seg2world(state.pose(c)), self.prims, want=want)
+                for c, cam in enumerate(state.cameras)]
+
+    # -- one frame ---------------------------------------------------------------------------------
+
+    def _visible(self, term, state, level, renders):
+        """Anchor points still visible at the current pose (depth test against the render)."""
+        c = term.view
+        cam = self._camera_at(state.cameras[c], level)
+        X = se3.apply(self.body.seg2world(state.pose(c))[term.segment], term.ref_points)
+        uv = cam.project(X)
+        scale = 2 ** level
+        u = np.rint(uv[:, 0] * scale).astype(int)
+        v = np.rint(uv[:, 1] * scale).astype(int)
+        h, w = renders[c].label.shape
+        ok = (u >= 0) & (u < w) & (v >= 0) & (v < h)
+        lab = np.full(len(u), -1)
+        lab[ok] = renders[c].label[v[ok], u[ok]]
+        return ok & (lab == term.segment)
+
+    def _system(self, state, level, terms_by_view, images, em_weights):
+        """Total normal equations over views and terms at ``state``.
+
+        Terms of one view are summed per segment first and mapped to the pose parameters
+        once (:func:`image_motion.assemble`).
+        """
+        roots_cols, scale_cols, angle_cols, P = self.layout(len(state.cameras))
+        H = np.zeros((P, P))
+        g = np.zeros(P)
+        cost = 0.0
+        accs = {}
+        for c, terms in enumerate(terms_by_view):
+            cam = self._camera_at(state.cameras[c], level)
+            pose = state.pose(c)
+            seg2world = self.body.seg2world(pose)
+            A = b = None
+            for key, term, weight in terms:
+                if term is None or len(term) == 0 or weight == 0:
+                    continue
+                stack = images[c].stacks[level] if term.name != "silhouette" \
+                    else images[c].sdf[level]
+                acc = accumulate(term, stack, cam, seg2world, self.body.n_segments,
+                                 with_scale=not self.calibrated,
+                                 extra_weight=em_weights.get((c, key)))
+                A = weight * acc.A if A is None else A + weight * acc.A
+                b = weight * acc.b if b is None else b + weight * acc.b
+                cost += weight * acc.cost
+                accs[(c, key)] = acc
+            if A is None:
+                continue
+            total = Accumulated(A, b, 0.0, 0.0, None, None)
+            Hc, gc = assemble(total, self.body.segment_jacobians(pose),
+                              root_cols=roots_cols[c], angle_cols=angle_cols, n_params=P,
+                              scale_col=scale_cols[c])
+            H += Hc
+            g += gc
+        return H, g, cost, accs
+
+    def step(self, state_t, images_t, images_t1, previous=None, renders_t=None):
+        """Track one frame: the pose at t+1 from the pose at t.
+
+        Parameters
+        ----------
+        state_t : State
+        images_t, images_t1 : list of ViewImages
+        previous : State, optional
+            Pose at t-1, for the constant-velocity prediction.
+        renders_t : list of RenderResult, optional
+            Renders of ``state_t`` (from the previous step), to save rendering them again.
+
+        Returns
+        -------
+        state : State
+        report : StepReport
+        """
+        s = self.settings
+        V = len(state_t.cameras)
+        if renders_t is None:
+            renders_t = self.render_views(state_t)
+        flow = self.template_terms(state_t, images_t, renders_t)
+        sil = self.contour_terms(state_t, renders_t) if images_t1[0].sdf is not None else None
+        state = self.predict(state_t, previous)
+        prior_center = state.copy()
+        total_iters = 0
+        cost = 0.0
+        for level in reversed(range(s.levels)):
+            terms_by_view = []
+            for c in range(V):
+                terms = [("flow", flow[level][c], s.flow_weight)]
+                if self.anchor_terms is not None and s.anchor_weight > 0:
+                    at = self.anchor_terms[level][c]
+                    vis = self._visible(at, state_t, level, renders_t)
+                    terms.append(("anchor", at.subset(vis), s.anchor_weight))
+                if sil is not None and images_t1[c].sdf is not None and s.silhouette_weight > 0:
+                    st = sil[c]
+                    # distances shrink with the pyramid level: keep pixel units per level
+                    terms.append(("silhouette", st, s.silhouette_weight * 4 ** level))
+                terms_by_view.append(terms)
+            em = {}
+            lam = s.damping
+            H, g, cost, accs = self._system(state, level, terms_by_view, images_t1, em)
+            iters = s.iterations[min(s.levels - 1 - level, len(s.iterations) - 1)]
+            for it in range(iters):
+                P = len(g)
+                diag = np.diag(H).copy()
+                reg = s.prior_weight * (np.trace(H) / max(P, 1) + 1e-9)
+                # pull towards the prediction (keeps unobservable DOFs still)
+                prior_delta = self._difference(prior_center, state)
+                A = H + lam * np.diag(diag + 1e-9) + reg * np.eye(P)
+                rhs = -(g - reg * prior_delta)
+                try:
+                    delta = np.linalg.solve(A, rhs)
+                except np.linalg.LinAlgError:
+                    delta = np.linalg.lstsq(A, rhs, rcond=None)[0]
+                candidate = self.retract(state, delta)
+                H2, g2, cost2, accs2 = self._system(candidate, level, terms_by_view, images_t1, em)
+                total_iters += 1
+                if cost2 <= cost * (1 + 1e-9):
+                    state, H, g, cost, accs = candidate, H2, g2, cost2, accs2
+                    lam = max(lam / 3, 1e-6)
+                    if s.em and it == 0:
+                        em = self._em_weights(terms_by_view, images_t1, accs, level)
+                        H, g, cost, accs = self._system(state, level, terms_by_view, images_t1, em)
+                    if np.abs(delta).max() < 1e-5:
+                        break
+                else:
+                    lam *= 10
+                    if lam > 1e4:
+                        break
+        renders = self.render_views(state)
+        residual = np.zeros(V)
+        iou = np.full(V, np.nan)
+        for c in range(V):
+            acc = accs.get((c, "flow"))
+            if acc is not None and acc.inside.any():
+                residual[c] = 255.0 * np.mean(np.abs(acc.residual[acc.inside]))
+            if images_t1[c].foreground is not None:
+                iou[c] = silhouette_iou(renders[c].label >= 0, images_t1[c].foreground)
+        return state, StepReport(residual, iou, cost, total_iters, renders)
+
+    def _difference(self, target, state):
+        """Parameter vector that moves ``state`` to ``target`` (to first order)."""
+        roots_cols, scale_cols, angle_cols, P = self.layout(len(state.cameras))
+        d = np.zeros(P)
+        for c, cols in enumerate(roots_cols):
+            d[cols] = se3.log_se3(target.roots[c] @ se3.invert(state.roots[c]))
+            if scale_cols[c] is not None:
+                d[scale_cols[c]] = np.log(target.cameras[c].s / state.cameras[c].s)
+        d[angle_cols] = target.angles - state.angles
+        return d
+
+    def _em_weights(self, terms_by_view, images_t1, accs, level):
+        """One EM step on the support maps (B&M §2.4): ownership against a static background.
+
+        For each template pixel, the segment's motion predicts ``I(t+1)`` at the moved point
+        (residual ``r_fg``); a static background predicts ``I(t+1)`` at the pixel itself
+        (``r_bg``). The posterior of the segment layer, with the foreground mask as its prior,
+        replaces the pixel's weight. Cameras are assumed static (the background's dominant
+        motion is zero).
+        """
+        sig2 = self.settings.flow_scale ** 2
+        out = {}
+        for c, terms in enumerate(terms_by_view):
+            key = (c, "flow")
+            term = terms[0][1]
+            acc = accs.get(key)
+            if acc is None or term.uv is None:
+                continue
+            vals, _ = sample(images_t1[c].stacks[level], term.uv)
+            r_bg = vals[:, 0] - term.target
+            prior = np.where(term.weight >= 1.0, 0.8, 0.3)
+            p_fg = prior * np.exp(-0.5 * acc.residual ** 2 / sig2)
+            p_bg = (1.0 - prior) * np.exp(-0.5 * r_bg ** 2 / sig2)
+            own = p_fg / (p_fg + p_bg + 1e-300)
+            out[key] = own / term.weight
+        return out

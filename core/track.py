@@ -1,0 +1,349 @@
+"""Track a take: plates and markers in, a :class:`result.TrackResult` out.
+
+The take runs from anchor to anchor. Between two anchors it is tracked forward from the first
+and backward from the second, and the two passes are blended with weights that fall off with the
+distance from their anchor, so that a later anchor corrects the drift of the earlier one; before
+the first anchor the take is tracked backward, after the last forward. Each anchor frame's pose
+comes from the markers (:func:`initialize.initialize`, Bregler & Malik §2.6).
+
+Working images are the plates scaled so that their longer side is at most ``max_size`` pixels;
+results are reported in the plates' own pixels.
+"""
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from . import se3
+from .background import estimate_background, model_coverage
+from .body import Pose
+from .camera import ScaledOrthoCamera
+from .differential import DifferentialTracker, Settings, State, prepare_images
+from .errors import ZoopraxisError
+from .markers import check_markers
+from .plates import to_gray_float
+from .result import TrackResult
+
+# Status thresholds (silhouette overlap of model and foreground; grey residual 0-255).
+IOU_LOST, IOU_UNCERTAIN = 0.3, 0.5
+RESIDUAL_UNCERTAIN = 2.5   # times the take's median residual
+
+
+@dataclass
+class Initial:
+    """Poses the tracker starts from: what :func:`initialize.initialize` returns.
+
+    Attributes
+    ----------
+    body : BodyModel
+    poses : dict of int to Pose
+        Pose per anchor frame (world; body-centred when uncalibrated).
+    cameras : dict of str to camera
+        Calibrated: the plates' cameras. Uncalibrated: fitted scaled-orthographic cameras.
+    view_cameras : dict of int to dict of str to camera, optional
+        Uncalibrated: the fitted camera of every view at every anchor frame.
+    warnings : list of str
+    """
+
+    body: object
+    poses: dict
+    cameras: dict
+    view_cameras: dict = None
+    warnings: list = field(default_factory=list)
+
+
+class FrameSource:
+    """Working-resolution colour frames of all views, decoded once and kept for the take.
+
+    Backward passes read frames in reverse; decoding a video backwards is slow, so frames are
+    kept in memory (uint8) up to ``budget_bytes`` and re-read beyond that.
+    """
+
+    def __init__(self, plates, views, offsets, factors, budget_bytes=3e9):
+        self.plates = plates
+        self.views = views
+        self.offsets = offsets
+        self.factors = factors
+        self.cache = {}
+        sizes = [int(round(plates[v].image_size[0] * factors[v]))
+                 * int(round(plates[v].image_size[1] * factors[v])) * 3 for v in views]
+        self.per_frame = sum(sizes)
+        self.budget = budget_bytes
+
+    def colour(self, frame):
+        if frame in self.cache:
+            return self.cache[frame]
+        out = []
+        for v in self.views:
+            img = self.plates[v].read(frame + self.offsets.get(v, 0))
+            f = self.factors[v]
+            if f != 1.0:
+                w, h = self.plates[v].image_size
+                img = cv2.resize(img, (int(round(w * f)), int(round(h * f))),
+                                 interpolation=cv2.INTER_AREA)
+            out.append(img)
+        if (len(self.cache) + 1) * self.per_frame <= self.budget:
+            self.cache[frame] = out
+        return out
+
+
+def _blend_states(a, b, w):
+    """Pose between two states: angles linearly, roots along the SE(3) geodesic (w: 0 -> a)."""
+    out = a.copy()
+    out.angles = (1 - w) * a.angles + w * b.angles
+    for c in range(len(a.roots)):
+        rel = se3.log_se3(b.roots[c] @ se3.invert(a.roots[c]))
+        out.roots[c] = se3.exp_se3(w * rel) @ a.roots[c]
+    if hasattr(a.cameras[0], "s"):
+        out.cameras = [ca.replace(s=float(np.exp((1 - w) * np.log(ca.s) + w * np.log(cb.s))))
+                       for ca, cb in zip(a.cameras, b.cameras)]
+    return out
+
+
+class Cancelled(Exception):
+    """Raised inside the tracking loop when the caller's cancel() says so."""
+
+
+def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template="full",
+          settings=None, init=None, max_size=960, progress=None, cancel=None, log=None):
+    """Track a take with the differential tracker.
+
+    Parameters
+    ----------
+    plates : dict of str to Plate
+        One plate per view, in view order.
+    anchors : list of markers.Anchor
+    cameras : dict of str to PinholeCamera, optional
+        Calibrated mode when given (one per view); uncalibrated otherwise.
+    frames : range, optional
+        Take frames to track (default: all frames the plates share).
+    offsets : dict of str to int, optional
+        Per-view plate frame offset (take frame f is plate frame f + offset).
+    init : Initial, optional
+        Starting poses; by default fitted to the markers with :func:`initialize.initialize`.
+    progress : callable(done, total), optional
+    cancel : callable() -> bool, optional
+        Polled once a frame; on cancel the frames already tracked are returned.
+
+    Returns
+    -------
+    TrackResult
+    """
+    from .plates import check_same_length
+
+    views = list(plates)
+    offsets = dict(offsets or {})
+    n_total = check_same_length(plates, offsets)
+    frames = range(0, n_total) if frames is None else frames
+    if len(frames) < 1:
+        raise ZoopraxisError("the frame range is empty")
+    if frames.start < 0 or frames.stop > n_total:
+        raise ZoopraxisError(f"frames {frames.start}:{frames.stop} are outside the take "
+                             f"(0:{n_total})")
+    calibrated = cameras is not None
+    if calibrated:
+        missing = [v for v in views if v not in cameras]
+        if missing:
+            raise ZoopraxisError(f"the calibration has no camera for view '{missing[0]}'")
+        for v in views:
+            if tuple(cameras[v].image_size) != tuple(plates[v].image_size):
+                raise ZoopraxisError(
+                    f"view '{v}': calibration image size {tuple(cameras[v].image_size)} differs "
+                    f"from the plate's {tuple(plates[v].image_size)}")
+    check_markers(anchors, views, n_total)
+    inside = [a for a in anchors if frames.start <= a.frame < frames.stop]
+    if not inside:
+        raise ZoopraxisError(f"no marker anchor inside frames {frames.start}:{frames.stop} "
+                             f"(anchors at {', '.join(str(a.frame) for a in anchors)})")
+    log = log or (lambda msg: None)
+    settings = settings or Settings()
+
+    if init is None:
+        from .initialize import initialize
+
+        res = initialize(inside, {v: cameras[v] for v in views} if calibrated else None,
+                         template=template, calibrated=calibrated, views=views)
+        init = Initial(res.body, res.poses, res.cameras, getattr(res, "view_cameras", None),
+                       list(getattr(res, "warnings", [])))
+    for w in init.warnings:
+        log(f"warning: {w}")
+    body = init.body
+
+    # Working resolution and cameras
+    factors = {v: min(1.0, max_size / max(plates[v].image_size)) for v in views}
+    source = FrameSource(plates, views, offsets, factors)
+
+    def working_cameras(cams):
+        return [cams[v].scaled(factors[v], sampling="resize") if factors[v] != 1.0 else cams[v]
+                for v in views]
+
+    def state_at(frame):
+        pose = init.poses[frame]
+        if calibrated:
+            return State(np.stack([pose.root] * len(views)), pose.angles.copy(),
+                         working_cameras(cameras))
+        vc = (init.view_cameras or {}).get(frame, init.cameras)
+        roots, cams = [], []
+        for v in views:
+            cam = vc[v]
+            body2cam = se3.transform(cam.R, cam.t) @ pose.root
+            roots.append(body2cam)
+            cams.append(ScaledOrthoCamera(cam.name, cam.image_size, cam.s, c=cam.c))
+        return State(np.stack(roots), pose.angles.copy(), working_cameras(dict(zip(views, cams))))
+
+    tracker = DifferentialTracker(body, calibrated, settings)
+
+    # Background models from frames spread over the take
+    sample_frames = np.unique(np.linspace(frames.start, frames.stop - 1,
+                                          min(25, len(frames))).astype(int))
+    log(f"background: {len(sample_frames)} frames per view")
+    per_view = [[] for _ in views]
+    for f in sample_frames:
+        for c, img in enumerate(source.colour(int(f))):
+            per_view[c].append(img)
+    backgrounds = [estimate_background(imgs) if len(imgs) >= 5 else None for imgs in per_view]
+    use_bg = [bg is not None for bg in backgrounds]
+    # A view whose background swallowed the person (who stood still) gives no silhouette.
+    a0 = inside[0].frame
+    st0 = state_at(a0)
+    r0 = tracker.render_views(st0, want=())
+    colour0 = source.colour(a0)
+    for c in range(len(views)):
+        if use_bg[c]:
+            cov = model_coverage(r0[c].label >= 0, backgrounds[c].foreground(colour0[c]))
+            if cov < 0.5:
+                use_bg[c] = False
+                log(f"view '{views[c]}': background model unreliable here "
+                    f"(covers {cov:.0%} of the body); silhouettes off")
+
+    def images(frame):
+        out = []
+        for c, img in enumerate(source.colour(frame)):
+            fg = backgrounds[c].foreground(img) if use_bg[c] else None
+            out.append(prepare_images(to_gray_float(img), settings.levels,
+                                      settings.smooth_sigma, fg))
+        return out
+
+    # Plan: passes between anchors
+    anchor_frames = [a.frame for a in inside]
+    passes = []
+    if anchor_frames[0] > frames.start:
+        passes.append((anchor_frames[0], frames.start, None))
+    for a, b in zip(anchor_frames[:-1], anchor_frames[1:]):
+        passes.append((a, b, "blend"))
+    if anchor_frames[-1] < frames.stop - 1:
+        passes.append((anchor_frames[-1], frames.stop - 1, None))
+    total = sum(abs(b - a) * (2 if kind == "blend" else 1) for a, b, kind in passes)
+    done = 0
+
+    states, reports = {}, {}
+    for a in anchor_frames:
+        states[a] = state_at(a)
+        reports[a] = None
+
+    def run(start, stop):
+        """Track from anchor ``start`` to ``stop`` (inclusive), either direction."""
+        nonlocal done
+        step = 1 if stop > start else -1
+        st = state_at(start)
+        ims = images(start)
+        renders = tracker.render_views(st)
+        tracker.set_anchor(st, ims, renders)
+        prev = None
+        out = {}
+        for f in range(start + step, stop + step, step):
+            if cancel is not None and cancel():
+                raise Cancelled(out)
+            ims1 = images(f)
+            new, rep = tracker.step(st, ims, ims1, prev, renders)
+            out[f] = (new, rep)
+            prev, st, ims, renders = st, new, ims1, rep.renders
+            done += 1
+            if progress is not None:
+                progress(done, total)
+        return out
+
+    cancelled = False
+    try:
+        for a, b, kind in passes:
+            fwd = run(a, b)
+            if kind != "blend":
+                for f, (st, rep) in fwd.items():
+                    states[f], reports[f] = st, rep
+                continue
+            bwd = run(b, a)
+            for f in range(a + 1, b):
+                w = (f - a) / (b - a)
+                states[f] = _blend_states(fwd[f][0], bwd[f][0], w)
+                reports[f] = fwd[f][1] if w < 0.5 else bwd[f][1]
+    except Cancelled as exc:
+        cancelled = True
+        for f, (st, rep) in exc.args[0].items():
+            if f not in states:
+                states[f], reports[f] = st, rep
+        log("cancelled: keeping the frames tracked so far")
+
+    return _make_result(body, views, plates, factors, states, reports, calibrated, init,
+                        anchor_frames, frames, cancelled)
+
+
+def _make_result(body, views, plates, factors, states, reports, calibrated, init,
+                 anchor_frames, frames, cancelled):
+    order = sorted(states)
+    F = len(order)
+    joints3d = np.zeros((F, 17, 3))
+    joints2d = {v: np.zeros((F, 17, 2)) for v in views}
+    residual = {v: np.zeros(F) for v in views}
+    roots = np.zeros((F, 4, 4))
+    angles = np.zeros((F, body.n_dofs))
+    iou = np.full((F, len(views)), np.nan)
+    ref = None
+    if not calibrated:
+        # Body-centred frame: the body as camera 0 saw it at the first anchor, made Z-up.
+        a0 = states[anchor_frames[0]]
+        ref = se3.invert(a0.roots[0])
+    for i, f in enumerate(order):
+        st = states[f]
+        if calibrated:
+            root = st.roots[0]
+        else:
+            root = ref @ st.roots[0]
+        pose = Pose(root, st.angles)
+        roots[i], angles[i] = root, st.angles
+        joints3d[i] = body.joints(pose)
+        for c, v in enumerate(views):
+            cam = st.cameras[c]
+            full = cam.scaled(1.0 / factors[v], sampling="resize") if factors[v] != 1.0 else cam
+            joints2d[v][i] = full.project(body.joints(st.pose(c)))
+            rep = reports.get(f)
+            if rep is not None:
+                residual[v][i] = rep.residual[c]
+                iou[i, c] = rep.iou[c]
+    status = []
+    res_all = np.array([[residual[v][i] for v in views] for i in range(F)])
+    med = np.median(res_all[res_all > 0]) if np.any(res_all > 0) else 1.0
+    for i, f in enumerate(order):
+        if f in anchor_frames:
+            status.append("ok")
+            continue
+        ious = iou[i][np.isfinite(iou[i])]
+        worst_res = res_all[i].max()
+        if len(ious) and ious.max() < IOU_LOST:
+            status.append("lost")
+        elif (len(ious) and ious.min() < IOU_UNCERTAIN) or worst_res > RESIDUAL_UNCERTAIN * med:
+            status.append("uncertain")
+        else:
+            status.append("ok")
+    fps = plates[views[0]].fps or 30.0
+    body_info = {"template": body.template, "shapes": body.shapes,
+                 "dims": {k: round(v, 5) for k, v in body.dims.items()},
+                 "dof_names": list(body.dof_names)}
+    extra = {"tracker": "differential", "anchors": [int(a) for a in anchor_frames],
+             "silhouette_iou": np.round(np.nan_to_num(iou, nan=-1.0), 4).tolist(),
+             "cancelled": cancelled,
+             "warnings": list(init.warnings)}
+    return TrackResult(mode="calibrated" if calibrated else "uncalibrated", fps=float(fps),
+                       frames=np.array(order), joints3d=joints3d, joints2d=joints2d,
+                       residual=residual, status=status, body=body_info, roots=roots,
+                       angles=angles, extra=extra)
