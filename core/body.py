@@ -288,6 +288,7 @@ class BodyModel:
     landmark_segment: np.ndarray      # (17,) segment index carrying each standard joint
     landmark_points: np.ndarray       # (17, 3) reference positions of the standard joints
     _points: dict = field(repr=False, compare=False)
+    _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     # -- sizes and lookups ------------------------------------------------------------------
 
@@ -370,7 +371,11 @@ class BodyModel:
 
     @property
     def _dofs_of_segment(self):
-        return [np.flatnonzero(self.dof_segment == k) for k in range(self.n_segments)]
+        cached = self._cache.get("dofs_of_segment")
+        if cached is None:
+            cached = [np.flatnonzero(self.dof_segment == k) for k in range(self.n_segments)]
+            self._cache["dofs_of_segment"] = cached
+        return cached
 
     @staticmethod
     def _batch(pose_or_root, angles):
@@ -426,6 +431,21 @@ class BodyModel:
         prefix, _ = self._prefix_and_segments(pose.root[None], pose.angles[None])
         return np.einsum("nij,nj->ni", se3.adjoint(prefix[0]), self.twists)
 
+    def kinematics(self, pose):
+        """``seg2world`` and ``segment_jacobians`` of one pose from a single pass.
+
+        Returns
+        -------
+        seg2world : array, shape (S, 4, 4)
+        J : array, shape (S, 6, 6 + n_dofs)
+        """
+        prefix, T = self._prefix_and_segments(pose.root[None], pose.angles[None])
+        tw = np.einsum("nij,nj->ni", se3.adjoint(prefix[0]), self.twists)
+        J = np.zeros((self.n_segments, 6, self.n_params))
+        J[:, :, :6] = np.eye(6)
+        J[:, :, 6:] = self.chain[:, None, :] * tw.T[None]
+        return T[0], J
+
     def segment_jacobians(self, pose):
         """Spatial velocity of every segment per unit of each pose parameter.
 
@@ -438,11 +458,7 @@ class BodyModel:
         -------
         J : array, shape (S, 6, 6 + n_dofs)
         """
-        tw = self.spatial_twists(pose)                                    # (n, 6)
-        J = np.zeros((self.n_segments, 6, self.n_params))
-        J[:, :, :6] = np.eye(6)
-        J[:, :, 6:] = self.chain[:, None, :] * tw.T[None]
-        return J
+        return self.kinematics(pose)[1]
 
     def joints_jacobian(self, pose):
         """Standard joints and their derivative with respect to a pose increment.

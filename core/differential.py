@@ -50,7 +50,7 @@ class Settings:
     silhouette_margin: float = 1.0    # contour may stray this far outside the silhouette, px
     em: bool = True                   # EM refinement of the support maps
     velocity: float = 0.5             # fraction of the last motion used to predict the next
-    prior_weight: float = 1e-3        # pull towards the prediction, relative to the data
+    prior_weight: float = 0.05        # pull towards the prediction, relative to the data
     damping: float = 1e-3             # initial Levenberg-Marquardt damping
 
 
@@ -160,6 +160,16 @@ class DifferentialTracker:
         angles = np.arange(7 * n_views, 7 * n_views + n)
         return roots, scales, angles, 7 * n_views + n
 
+    def _param_groups(self, n_views):
+        """Index groups of like parameters: root translations, root rotations, scales, angles."""
+        roots_cols, scale_cols, angle_cols, _ = self.layout(n_views)
+        roots = np.unique(np.concatenate(roots_cols))
+        groups = [roots[np.arange(len(roots)) % 6 < 3], roots[np.arange(len(roots)) % 6 >= 3],
+                  angle_cols]
+        if scale_cols[0] is not None:
+            groups.append(np.array(scale_cols))
+        return groups
+
     def retract(self, state, delta):
         """Apply a parameter increment to a state, clamping the angles to the joint limits."""
         roots_cols, scale_cols, angle_cols, _ = self.layout(len(state.cameras))
@@ -236,24 +246,29 @@ class DifferentialTracker:
             out.append(per_view)
         return out
 
-    def contour_terms(self, state, renders):
-        """Silhouette terms: model contour points should land on the observed boundary."""
+    def contour_terms(self, state, level):
+        """Silhouette terms: the model's contour points should lie on the observed boundary.
+
+        The contour is rendered at the current estimate and at the level's resolution, so the
+        points are the occluding contour of the pose being refined, not of the previous frame.
+        """
         terms = []
-        for c, rr in enumerate(renders):
-            lab = rr.label
-            fgm = lab >= 0
+        for c, cam in enumerate(state.cameras):
+            cam_l = self._camera_at(cam, level)
+            T = self.body.seg2world(state.pose(c))
+            rr = render(cam_l, T, self.prims, want=("point",))
+            fgm = rr.label >= 0
             eroded = cv2.erode(fgm.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
             vv, uu = np.nonzero(fgm & ~eroded)
             if len(vv) > 1500:
                 keep = np.linspace(0, len(vv) - 1, 1500).astype(int)
                 vv, uu = vv[keep], uu[keep]
-            seg = lab[vv, uu].astype(np.int64)
+            seg = rr.label[vv, uu].astype(np.int64)
             X = rr.point[vv, uu].astype(np.float64)
-            T = self.body.seg2world(state.pose(c))
             ref = se3.apply(se3.invert(T)[seg], X)
             terms.append(Term(c, seg, ref, np.zeros(len(seg)), np.ones(len(seg)),
-                              self.settings.silhouette_scale, "silhouette",
-                              hinge=self.settings.silhouette_margin))
+                              self.settings.silhouette_scale / 2 ** level, "silhouette",
+                              hinge=self.settings.silhouette_margin / 2 ** level))
         return terms
 
     def set_anchor(self, state, images, renders):
@@ -304,7 +319,7 @@ class DifferentialTracker:
         for c, terms in enumerate(terms_by_view):
             cam = self._camera_at(state.cameras[c], level)
             pose = state.pose(c)
-            seg2world = self.body.seg2world(pose)
+            seg2world, seg_jac = self.body.kinematics(pose)
             A = b = None
             for key, term, weight in terms:
                 if term is None or len(term) == 0 or weight == 0:
@@ -321,7 +336,7 @@ class DifferentialTracker:
             if A is None:
                 continue
             total = Accumulated(A, b, 0.0, 0.0, None, None)
-            Hc, gc = assemble(total, self.body.segment_jacobians(pose),
+            Hc, gc = assemble(total, seg_jac,
                               root_cols=roots_cols[c], angle_cols=angle_cols, n_params=P,
                               scale_col=scale_cols[c])
             H += Hc
@@ -350,19 +365,26 @@ class DifferentialTracker:
         if renders_t is None:
             renders_t = self.render_views(state_t)
         flow = self.template_terms(state_t, images_t, renders_t)
-        sil = self.contour_terms(state_t, renders_t) if images_t1[0].sdf is not None else None
+        use_sil = images_t1[0].sdf is not None and s.silhouette_weight > 0
         state = self.predict(state_t, previous)
         prior_center = state.copy()
         total_iters = 0
         cost = 0.0
         for level in reversed(range(s.levels)):
+            sil = self.contour_terms(state, level) if use_sil else None
             terms_by_view = []
             for c in range(V):
-                terms = [("flow", flow[level][c], s.flow_weight)]
+                # Flow and anchor appearance sample the same image: one term, two weights.
+                ft = flow[level][c]
+                parts = [Term(c, ft.segment, ft.ref_points, ft.target, ft.weight * s.flow_weight,
+                              ft.scale, "flow", ft.uv)]
                 if self.anchor_terms is not None and s.anchor_weight > 0:
                     at = self.anchor_terms[level][c]
-                    vis = self._visible(at, state_t, level, renders_t)
-                    terms.append(("anchor", at.subset(vis), s.anchor_weight))
+                    at = at.subset(self._visible(at, state_t, level, renders_t))
+                    parts.append(Term(c, at.segment, at.ref_points, at.target,
+                                      at.weight * s.anchor_weight, at.scale, "anchor",
+                                      np.full((len(at), 2), np.nan)))
+                terms = [("flow", Term.concat(parts, "flow"), 1.0)]
                 if sil is not None and images_t1[c].sdf is not None and s.silhouette_weight > 0:
                     st = sil[c]
                     # distances shrink with the pyramid level: keep pixel units per level
@@ -373,12 +395,16 @@ class DifferentialTracker:
             H, g, cost, accs = self._system(state, level, terms_by_view, images_t1, em)
             iters = s.iterations[min(s.levels - 1 - level, len(s.iterations) - 1)]
             for it in range(iters):
-                P = len(g)
                 diag = np.diag(H).copy()
-                reg = s.prior_weight * (np.trace(H) / max(P, 1) + 1e-9)
-                # pull towards the prediction (keeps unobservable DOFs still)
+                # Pull towards the prediction with a curvature of prior_weight times the median
+                # data curvature of the same kind of parameter: negligible for what the images
+                # determine, decisive for what they don't (a limb hidden in every view, depth
+                # under orthographic projection).
+                reg = np.zeros_like(diag)
+                for cols in self._param_groups(V):
+                    reg[cols] = s.prior_weight * (np.median(diag[cols]) + 1e-12)
                 prior_delta = self._difference(prior_center, state)
-                A = H + lam * np.diag(diag + 1e-9) + reg * np.eye(P)
+                A = H + lam * np.diag(diag) + np.diag(reg)
                 rhs = -(g - reg * prior_delta)
                 try:
                     delta = np.linalg.solve(A, rhs)
@@ -438,11 +464,14 @@ class DifferentialTracker:
             acc = accs.get(key)
             if acc is None or term.uv is None:
                 continue
-            vals, _ = sample(images_t1[c].stacks[level], term.uv)
+            # Anchor points carry NaN pixels: they keep their weight.
+            vals, ok = sample(images_t1[c].stacks[level], np.nan_to_num(term.uv, nan=-1.0))
             r_bg = vals[:, 0] - term.target
-            prior = np.where(term.weight >= 1.0, 0.8, 0.3)
+            prior = np.where(term.weight >= self.settings.flow_weight, 0.8, 0.3)
             p_fg = prior * np.exp(-0.5 * acc.residual ** 2 / sig2)
             p_bg = (1.0 - prior) * np.exp(-0.5 * r_bg ** 2 / sig2)
             own = p_fg / (p_fg + p_bg + 1e-300)
-            out[key] = own / term.weight
+            fg_prior = np.where(term.weight >= self.settings.flow_weight, 1.0, 0.25)
+            weight = np.where(ok, own / fg_prior, 1.0)
+            out[key] = weight
         return out

@@ -65,8 +65,38 @@ class Term:
     uv: np.ndarray = None
     hinge: float = None
 
+    def __post_init__(self):
+        # Keep points grouped by segment, so the per-segment sums use contiguous slices.
+        seg = np.asarray(self.segment)
+        if len(seg) and np.any(seg[1:] < seg[:-1]):
+            order = np.argsort(seg, kind="stable")
+            self.segment = seg[order]
+            self.ref_points = self.ref_points[order]
+            self.target = self.target[order]
+            self.weight = self.weight[order]
+            if self.uv is not None:
+                self.uv = self.uv[order]
+        segs, first = np.unique(self.segment, return_index=True)
+        self.groups = list(zip(segs.tolist(), first.tolist(),
+                               first[1:].tolist() + [len(self.segment)]))
+
     def __len__(self):
         return len(self.segment)
+
+    @staticmethod
+    def concat(terms, name=""):
+        """One term from several observed in the same view with the same image and scale."""
+        terms = [t for t in terms if t is not None and len(t)]
+        if not terms:
+            return None
+        uv = None
+        if all(t.uv is not None for t in terms):
+            uv = np.concatenate([t.uv for t in terms])
+        return Term(terms[0].view, np.concatenate([t.segment for t in terms]),
+                    np.concatenate([t.ref_points for t in terms]),
+                    np.concatenate([t.target for t in terms]),
+                    np.concatenate([t.weight for t in terms]), terms[0].scale,
+                    name or terms[0].name, uv, terms[0].hinge)
 
     def subset(self, keep):
         return Term(self.view, self.segment[keep], self.ref_points[keep], self.target[keep],
@@ -95,20 +125,30 @@ def image_with_gradients(image):
 def sample(stack, uv):
     """Bilinear samples of a (H, W, C) float32 image at pixels ``uv`` (N, 2).
 
+    Exact bilinear interpolation in numpy (cv2.remap quantises positions to 1/32 pixel, which
+    would cap the sub-pixel precision of the tracker).
+
     Returns
     -------
-    values : array, shape (N, C)
+    values : array, shape (N, C) float32
     inside : array of bool, shape (N,)
         False where the point falls outside the image (values there are meaningless).
     """
-    h, w = stack.shape[:2]
-    u = uv[:, 0].astype(np.float32)
-    v = uv[:, 1].astype(np.float32)
-    inside = (u >= 0) & (u <= w - 1) & (v >= 0) & (v <= h - 1) & np.isfinite(u) & np.isfinite(v)
-    u = np.where(inside, u, 0).reshape(-1, 1)
-    v = np.where(inside, v, 0).reshape(-1, 1)
-    out = cv2.remap(stack, u, v, interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    return out.reshape(len(uv), -1), inside
+    h, w, C = stack.shape
+    u = uv[:, 0]
+    v = uv[:, 1]
+    inside = (u >= 0) & (u <= w - 1) & (v >= 0) & (v <= h - 1)   # NaN compares False
+    u = np.where(inside, u, 0.0)
+    v = np.where(inside, v, 0.0)
+    u0 = np.minimum(u.astype(np.int64), w - 2)
+    v0 = np.minimum(v.astype(np.int64), h - 2)
+    fu = (u - u0).astype(np.float32)[:, None]
+    fv = (v - v0).astype(np.float32)[:, None]
+    flat = stack.reshape(-1, C)
+    i00 = v0 * w + u0
+    top = flat[i00] * (1 - fu) + flat[i00 + 1] * fu
+    bottom = flat[i00 + w] * (1 - fu) + flat[i00 + w + 1] * fu
+    return top * (1 - fv) + bottom * fv, inside
 
 
 def geman_mcclure_weights(r, scale):
@@ -191,16 +231,10 @@ def accumulate(term, stack, camera, seg2world, n_segments, *, with_scale=False, 
     S = n_segments
     A = np.zeros((S, 7, 7))
     b = np.zeros((S, 7))
-    seg = term.segment
-    order = np.argsort(seg, kind="stable")
-    bounds = np.searchsorted(seg[order], np.arange(S + 1))
     gw = g * w[:, None]
-    for k in range(S):
-        idx = order[bounds[k]:bounds[k + 1]]
-        if len(idx) == 0:
-            continue
-        A[k] = gw[idx].T @ g[idx]
-        b[k] = gw[idx].T @ r[idx]
+    for k, lo, hi in term.groups:
+        A[k] = gw[lo:hi].T @ g[lo:hi]
+        b[k] = gw[lo:hi].T @ r[lo:hi]
     s2 = term.scale ** 2
     cost = float(np.sum(term.weight * inside * (r * r / (r * r + s2) if robust else r * r)))
     return Accumulated(A, b, cost, float(w.sum()), r, inside)

@@ -5,11 +5,12 @@ rigidly attached to one segment. For every pixel the renderer intersects the cam
 the primitives and keeps the nearest hit in a z-buffer, so self-occlusion falls out. It gives:
 
 - the support map (Bregler & Malik §2.4: "the projection of the ellipsoids into the image"),
-  which is also Yamamoto et al.'s *region image* (§2.3, Fig. 4): the segment label per pixel;
-- the *depth image* (Yamamoto et al. §2.3, Fig. 4): camera z of the visible surface;
-- the 3D surface point ``q`` per pixel, "the solution of a quadratic equation" (Bregler &
-  Malik §2.3, after eq. 14), which the differential tracker differentiates;
-- the outward surface normal, for Sidenbladh et al.'s view-dependent weighting (§5).
+  which is also Yamamoto et al.'s *region image* (§2.4, Fig. 4): the segment label per pixel;
+- the *depth image* (Yamamoto et al. §2.4-2.5, Fig. 4): camera z of the visible surface;
+- the 3D surface point ``q_c`` per pixel, "the solution of a quadratic equation" (Bregler &
+  Malik §2.2, after eq. 14; step 1 of the recipe in §2.5);
+- the outward surface normal, for Sidenbladh et al.'s weighting by surface orientation
+  (§3.2, §5).
 
 Each primitive only casts the rays inside the projection of its bounding box, vectorized over
 that pixel rectangle in float32; points and normals are computed afterwards for the visible
@@ -30,7 +31,6 @@ from .errors import ZoopraxisError
 
 ELLIPSOID = 0
 CYLINDER = 1
-_KIND_NAMES = {ELLIPSOID: "ELLIPSOID", CYLINDER: "CYLINDER"}
 
 # Which surface of a primitive a ray hit: the quadric itself, or a cylinder's flat cap.
 _CURVED, _BASE_CAP, _TOP_CAP = 0, 1, 2
@@ -53,7 +53,7 @@ _F32_INF = np.float32(np.inf)
 # Primitives
 # ---------------------------------------------------------------------------------------------
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Primitives:
     """P primitives, each rigidly attached to one body segment.
 
@@ -289,11 +289,13 @@ def cylinder(segment, base, top, r_base, r_top=None, *, ry_ratio=1.0, x_dir=None
         x = np.eye(3)[np.argmin(np.abs(z))]
     else:
         x = _vec3(x_dir, "cylinder x_dir")
+        if not np.linalg.norm(x) > 0:
+            raise ZoopraxisError("cylinder x_dir must not be zero")
+        x = x / np.linalg.norm(x)
     x = x - (x @ z) * z
-    norm = np.linalg.norm(x)
-    if not norm > 1e-9 * max(1.0, float(np.linalg.norm(x_dir)) if x_dir is not None else 1.0):
+    if not np.linalg.norm(x) > 1e-9:
         raise ZoopraxisError("cylinder x_dir is parallel to the axis from base to top")
-    x = x / norm
+    x = x / np.linalg.norm(x)
     prim2seg = np.eye(4)
     prim2seg[:3, :3] = np.column_stack([x, np.cross(z, x), z])
     prim2seg[:3, 3] = base
@@ -325,7 +327,7 @@ def capsule(segment, a, b, radius):
 # Result
 # ---------------------------------------------------------------------------------------------
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class RenderResult:
     """Per-pixel rendering of a body in one view (or at a list of pixels).
 
@@ -359,7 +361,7 @@ class RenderResult:
 # Camera rays
 # ---------------------------------------------------------------------------------------------
 
-@dataclass
+@dataclass(eq=False)
 class _Rays:
     """A batch of camera rays: float32 components of any common shape ``S``.
 
@@ -398,12 +400,16 @@ _GRID_CACHE = OrderedDict()
 _GRID_CACHE_SIZE = 16
 
 
-def _camera_grid(camera):
-    """The camera's pixel rays as :class:`_Rays` of shape (H, W), and the image size (W, H)."""
+def _check_camera(camera):
     for name in ("image_size", "R", "t", "project", "pixel_rays", "cam_from_world"):
         if not hasattr(camera, name):
             raise ZoopraxisError(f"render: camera has no '{name}' "
                                  f"(got a {type(camera).__name__})")
+
+
+def _camera_grid(camera):
+    """The camera's pixel rays as :class:`_Rays` of shape (H, W), and the image size (W, H)."""
+    _check_camera(camera)
     W, H = (int(v) for v in camera.image_size)
     R = np.asarray(camera.R, dtype=float)
     t = np.asarray(camera.t, dtype=float)
@@ -419,6 +425,8 @@ def _camera_grid(camera):
     rays = _prepare_grid(origins, dirs, R, t, W, H)
     try:
         refs = (weakref.ref(dirs), weakref.ref(origins))
+        # The entry goes when the camera's rays go, so ids are never reused stale.
+        weakref.finalize(dirs, _GRID_CACHE.pop, key, None)
     except TypeError:  # not weak-referenceable: recompute next time
         return rays, (W, H)
     _GRID_CACHE[key] = refs + (R.copy(), t.copy(), (W, H), rays)
@@ -436,47 +444,30 @@ def _prepare_grid(origins, dirs, R, t, W, H):
     if origins.shape not in ((3,), (H, W, 3)):
         raise ZoopraxisError(f"render: camera.pixel_rays() origins have shape {origins.shape}, "
                              f"expected (3,) or ({H}, {W}, 3)")
-    ray_depth = dirs @ R[2]
-    if not np.all(ray_depth > 0):
+    return _prepare_rays(origins, dirs, R, t)
+
+
+def _prepare_rays(origins, dirs, R, t):
+    """Camera rays (origins (3,) or (..., 3), unit dirs (..., 3), world) as :class:`_Rays`.
+
+    The same elementwise arithmetic for a whole grid and for single pixels keeps
+    :func:`render_points` equal to :func:`render` at pixel centres.
+    """
+    # Camera z per unit of ray length; NaN rays (past the fold of a lens model) stay NaN and
+    # never hit anything.
+    ray_depth = dirs[..., 0] * R[2, 0] + dirs[..., 1] * R[2, 1] + dirs[..., 2] * R[2, 2]
+    if np.any(ray_depth <= 0):
         raise ZoopraxisError("render: camera rays must point in front of the camera "
                              "(positive camera z)")
-    d = np.ascontiguousarray((dirs / ray_depth[..., None]).transpose(2, 0, 1), dtype=np.float32)
+    d = np.moveaxis(dirs / ray_depth[..., None], -1, 0)
+    d = np.ascontiguousarray(d, dtype=np.float32)
     if origins.shape == (3,):
         return _Rays(d, origin=origins.copy())
-    o = np.ascontiguousarray(origins.transpose(2, 0, 1), dtype=np.float32)
-    depth0 = (origins @ R[2] + t[2]).astype(np.float32)
-    return _Rays(d, o=o, depth0=depth0)
-
-
-def _interpolate_rays(grid, uv):
-    """Rays through arbitrary pixel positions, bilinear in the camera's ray grid.
-
-    With directions scaled to unit depth the rays of an undistorted pinhole camera (and the
-    origins of a parallel projection) are affine in the pixel position, so bilinear
-    interpolation is exact up to rounding, and at integer pixels it returns the grid rays.
-
-    Returns
-    -------
-    _Rays, shape (N,)
-    """
-    H, W = grid.d.shape[1:]
-    u, v = uv[:, 0], uv[:, 1]
-    i0 = np.clip(np.floor(u), 0, max(W - 2, 0)).astype(np.intp)
-    j0 = np.clip(np.floor(v), 0, max(H - 2, 0)).astype(np.intp)
-    i1 = np.minimum(i0 + 1, W - 1)
-    j1 = np.minimum(j0 + 1, H - 1)
-    fu = u - i0
-    fv = v - j0
-    weights = ((1 - fu) * (1 - fv), fu * (1 - fv), (1 - fu) * fv, fu * fv)
-    corners = ((j0, i0), (j0, i1), (j1, i0), (j1, i1))
-
-    def lerp(a):
-        out = sum(w * a[..., j, i].astype(float) for w, (j, i) in zip(weights, corners))
-        return out.astype(np.float32)
-
-    if grid.pinhole:
-        return _Rays(lerp(grid.d), origin=grid.origin)
-    return _Rays(lerp(grid.d), o=lerp(grid.o), depth0=lerp(grid.depth0))
+    origins = np.broadcast_to(origins, dirs.shape)
+    o = np.ascontiguousarray(np.moveaxis(origins, -1, 0), dtype=np.float32)
+    depth0 = origins[..., 0] * R[2, 0] + origins[..., 1] * R[2, 1] + origins[..., 2] * R[2, 2]
+    depth0 += t[2]
+    return _Rays(d, o=o, depth0=depth0.astype(np.float32))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -498,7 +489,29 @@ def _world2norm(seg2world, prims):
     scale[:, [0, 1, 2], [0, 1, 2]] = prims.size
     scale[:, 3, 3] = 1.0
     norm2world = seg2world[prims.segment] @ prims.prim2seg @ scale
-    return norm2world, np.linalg.inv(norm2world)
+    return norm2world, _inv_affine(norm2world)
+
+
+def _det3(L):
+    """Determinants of 3x3 matrices, shape (..., 3, 3) -> (...)."""
+    return np.einsum("...i,...i->...", L[..., 0], np.cross(L[..., 1], L[..., 2]))
+
+
+def _inv_affine(T):
+    """Inverses of affine 4x4 transforms, shape (..., 4, 4), by the adjugate.
+
+    LAPACK's batched inverse costs a millisecond for a dozen 4x4 matrices on a busy machine,
+    more than casting the rays of a small limb.
+    """
+    L = T[..., :3, :3]
+    cols = L[..., 0], L[..., 1], L[..., 2]
+    adj = np.stack([np.cross(cols[1], cols[2]), np.cross(cols[2], cols[0]),
+                    np.cross(cols[0], cols[1])], axis=-2)
+    inv = np.zeros_like(T)
+    inv[..., :3, :3] = adj / _det3(L)[..., None, None]
+    inv[..., :3, 3] = -np.einsum("...ij,...j->...i", inv[..., :3, :3], T[..., :3, 3])
+    inv[..., 3, 3] = 1.0
+    return inv
 
 
 def _quadric(kind, taper):
@@ -532,6 +545,9 @@ def _ray_quadratic(rays, world2norm, kind, taper):
         Ray directions in the normalised frame.
     A, b : arrays of float32, shape (n,)
     C : float32 or array of float32, shape (n,)
+    shift : array of float32, shape (n,), or None
+        Parallel rays only: how far along the ray ``p`` is from the given origin; the roots
+        ``s`` count from ``p``.
     """
     M = world2norm[:3, :3]
     m = M.astype(np.float32)
@@ -540,18 +556,28 @@ def _ray_quadratic(rays, world2norm, kind, taper):
     A = np.einsum("ij,ij->j", e * D[:, None], e) if kind == CYLINDER \
         else np.einsum("ij,ij->j", e, e)
     if rays.pinhole:
-        p = (M @ rays.origin + world2norm[:3, 3]).astype(np.float32)
-        h = D * p + f
-        return p, e, A, h @ e, p @ h + f @ p + g
+        # One origin: its terms are scalars, worth computing in float64.
+        p = M @ rays.origin + world2norm[:3, 3]
+        h = D.astype(float) * p + f
+        C = np.float32(p @ h + f @ p + g)
+        p, h = p.astype(np.float32), h.astype(np.float32)
+        return p, e, A, h @ e, C, None
     p = m @ rays.o
     p += world2norm[:3, 3].astype(np.float32)[:, None]
+    # The whole line of sight of a parallel ray counts, and its origin may be far from the
+    # primitive, where b^2 - A C cancels: restart each ray at its closest approach to the
+    # primitive's centre.
+    shift = np.einsum("ij,ij->j", p, e)
+    shift /= np.einsum("ij,ij->j", e, e)
+    np.negative(shift, out=shift)
+    p += shift * e
     h = p * D[:, None]
     h += f[:, None]
     b = np.einsum("ij,ij->j", h, e)
     C = np.einsum("ij,ij->j", p, h)
     C += f @ p
     C += g
-    return p, e, A, b, C
+    return p, e, A, b, C, shift
 
 
 def _roots(A, b, C, disc):
@@ -567,10 +593,10 @@ def _hit_ellipsoid(rays, world2norm):
 
     In the normalised frame the ellipsoid is the unit sphere ``|p + s e|^2 = 1``. The near
     root is taken as ``C / q`` with ``q = -b + sqrt(b^2 - A C)``, which does not cancel when the
-    camera is far away (Bregler & Malik §2.3: ``q_c`` "is the solution of a quadratic
+    camera is far away (Bregler & Malik §2.2: ``q_c`` "is the solution of a quadratic
     equation").
     """
-    p, e, A, b, C = _ray_quadratic(rays, world2norm, ELLIPSOID, 1.0)
+    p, e, A, b, C, shift = _ray_quadratic(rays, world2norm, ELLIPSOID, 1.0)
     disc = b * b
     disc -= A * C
     if np.ndim(C) == 0 and C > 0:
@@ -581,16 +607,18 @@ def _hit_ellipsoid(rays, world2norm):
         np.maximum(disc, 0, out=disc)
         q = np.sqrt(disc, out=disc)
         q -= b
-        with np.errstate(divide="ignore", invalid="ignore"):
-            s = np.divide(C, q, out=q)
+        s = np.divide(C, q, out=q)
         s[miss] = _F32_INF
         return s
-    with np.errstate(divide="ignore", invalid="ignore"):
-        r1, r2 = _roots(A, b, C, disc)
-        near = np.minimum(r1, r2)
-        far = np.maximum(r1, r2)
-        s = np.where(near > 0, near, far)
-        s[~((disc >= 0) & (s > 0))] = _F32_INF
+    r1, r2 = _roots(A, b, C, disc)
+    s = np.minimum(r1, r2)
+    if rays.pinhole:
+        # From inside the ellipsoid the near root is behind the camera.
+        s = np.where(s > 0, s, np.maximum(r1, r2))
+        s[~(s > 0)] = _F32_INF
+    else:
+        s += shift
+    s[~(disc >= 0)] = _F32_INF
     return s
 
 
@@ -598,7 +626,7 @@ def _hit_cylinder(rays, world2norm, taper):
     """First hit on a capped cone frustum: ray parameter and surface code, shapes (n,).
 
     In the normalised frame the side is ``x^2 + y^2 = (1 + k z)^2`` with ``k = taper - 1`` and
-    ``0 <= z <= 1`` (Sidenbladh et al. §3 use straight cylinders, ``k = 0``); the caps are the
+    ``0 <= z <= 1`` (Sidenbladh et al. §3.1 use straight cylinders, ``k = 0``); the caps are the
     discs ``z = 0, x^2 + y^2 <= 1`` and ``z = 1, x^2 + y^2 <= taper^2``. The nearest valid
     candidate among both side roots and the caps is kept.
 
@@ -609,7 +637,7 @@ def _hit_cylinder(rays, world2norm, taper):
     surface : array of int8
         ``_CURVED``, ``_BASE_CAP`` or ``_TOP_CAP``.
     """
-    p, e, A, b, C = _ray_quadratic(rays, world2norm, CYLINDER, taper)
+    p, e, A, b, C, shift = _ray_quadratic(rays, world2norm, CYLINDER, taper)
     f32 = np.float32
     zero, one = f32(0), f32(1)
     px, py, pz = p
@@ -617,42 +645,57 @@ def _hit_cylinder(rays, world2norm, taper):
     disc = b * b
     disc -= A * C
     s = np.full(A.shape, _F32_INF, dtype=f32)
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        miss = disc < 0
-        for r in _roots(A, b, C, disc):
-            z = r * ez
-            z += pz
-            bad = z < zero
-            bad |= z > one
-            bad |= r <= zero
-            bad |= miss
-            bad |= r >= s
-            np.copyto(s, r, where=~bad)
-        surface = np.zeros(A.shape, dtype=np.int8)
-        caps = ((_BASE_CAP, zero, one), (_TOP_CAP, one, f32(taper)))
-        if np.ndim(C) == 0 and (C > 0 or not 0 <= pz <= 1):
-            # A camera outside the solid enters it through the side or through the one cap
-            # that faces it; from between the cap planes a cap can only be an exit.
-            caps = caps[:1] if pz < 0 else caps[1:] if pz > 1 else ()
-        for code, z_cap, r_cap in caps:
-            r = (z_cap - pz) / ez
-            x = r * ex
-            x += px
-            y = r * ey
-            y += py
-            x *= x
-            y *= y
-            x += y
-            ok = x <= r_cap * r_cap
+    real = disc >= 0
+    for r in _roots(A, b, C, disc):
+        z = r * ez
+        z += pz
+        ok = z >= zero
+        ok &= z <= one
+        ok &= real
+        ok &= r < s
+        if rays.pinhole:
             ok &= r > zero
-            ok &= r < s
-            np.copyto(s, r, where=ok)
-            surface[ok] = code
+        np.copyto(s, r, where=ok)
+    surface = np.zeros(A.shape, dtype=np.int8)
+    caps = ((_BASE_CAP, zero, one), (_TOP_CAP, one, f32(taper)))
+    if np.ndim(C) == 0 and (C > 0 or not 0 <= pz <= 1):
+        # A camera outside the solid enters it through the side or through the one cap
+        # that faces it; from between the cap planes a cap can only be an exit.
+        caps = caps[:1] if pz < 0 else caps[1:] if pz > 1 else ()
+    for code, z_cap, r_cap in caps:
+        r = (z_cap - pz) / ez
+        x = r * ex
+        x += px
+        y = r * ey
+        y += py
+        x *= x
+        y *= y
+        x += y
+        ok = x <= r_cap * r_cap
+        ok &= r < s
+        if rays.pinhole:
+            ok &= r > zero
+        np.copyto(s, r, where=ok)
+        surface[ok] = code
+    if shift is not None:
+        s += shift
     return s, surface
 
 
+def _contains(world2norm, kind, taper, X):
+    """Whether the world point ``X`` (3,) lies inside the primitive."""
+    x, y, z = world2norm[:3, :3] @ X + world2norm[:3, 3]
+    if kind == ELLIPSOID:
+        return x * x + y * y + z * z < 1.0
+    return 0.0 <= z <= 1.0 and x * x + y * y < (1.0 + (taper - 1.0) * z) ** 2
+
+
 def _intersect(rays, world2norm, kind, taper):
-    """Ray parameter of the first hit (inf: miss) and the surface code (None: all curved)."""
+    """Ray parameter of the first hit (inf: miss) and the surface code (None: all curved).
+
+    Misses divide by zero and take square roots of negatives on purpose: call under
+    ``np.errstate(divide="ignore", invalid="ignore", over="ignore")``.
+    """
     if kind == ELLIPSOID:
         return _hit_ellipsoid(rays, world2norm), None
     return _hit_cylinder(rays, world2norm, taper)
@@ -675,8 +718,8 @@ def _surface_geometry(rays, s, prim, surface, prims, world2norm, want):
     -------
     point, normal : arrays of float32, shape (3, N), or None when not wanted
     """
-    d = rays.d.astype(float)
-    X = d * s
+    X = rays.d.astype(float)
+    X *= s
     X += rays.origin[:, None] if rays.pinhole else rays.o
     if "normal" not in want:
         return X.astype(np.float32), None
@@ -697,12 +740,12 @@ def _surface_geometry(rays, s, prim, surface, prims, world2norm, want):
             code = surface[a:b]
             grad[:, code == _BASE_CAP] = ((0.0,), (0.0,), (-1.0,))
             grad[:, code == _TOP_CAP] = ((0.0,), (0.0,), (1.0,))
-        # Normals transform with the inverse transpose of norm2world, which is M^T.
-        np.matmul(M.T, grad, out=normal[:, a:b])
+        # Normals transform with the inverse transpose of norm2world, which is M^T. From
+        # inside a primitive the camera sees its inner side: flip to face the camera.
+        M_T = -M.T if rays.pinhole and _contains(world2norm[j], prims.kind[j],
+                                                prims.taper[j], rays.origin) else M.T
+        np.matmul(M_T, grad, out=normal[:, a:b])
     normal /= np.sqrt(np.einsum("ij,ij->j", normal, normal))
-    # The first hit's outward normal faces the camera unless the camera is inside the
-    # primitive; flip those so every normal faces the camera side.
-    normal[:, np.einsum("ij,ij->j", normal, d) > 0] *= -1.0
     point = X.astype(np.float32) if "point" in want else None
     return point, normal.astype(np.float32)
 
@@ -764,7 +807,7 @@ def _check_inputs(seg2world, prims, want):
     bad = np.flatnonzero(~np.all(np.isclose(seg2world[:, 3], (0, 0, 0, 1)), axis=1))
     if bad.size:
         raise ZoopraxisError(f"render: seg2world[{bad[0]}] must have last row [0, 0, 0, 1]")
-    dets = np.linalg.det(seg2world[:, :3, :3])
+    dets = _det3(seg2world[:, :3, :3])
     bad = np.flatnonzero(~(np.abs(dets) > 1e-12))
     if bad.size:
         raise ZoopraxisError(f"render: seg2world[{bad[0]}] is singular")
@@ -825,12 +868,85 @@ def _window(bbox, W, H):
     return x0, y0, max(x1, x0), max(y1, y0)
 
 
+def _cast_window(grid, rects, window, prims, world2norm, depth, prim, label, surface):
+    """Cast each primitive's rays in its rectangle and keep the nearer hits, in place.
+
+    Parameters
+    ----------
+    grid : _Rays, shape (H, W)
+    rects : array, shape (P, 4)
+        From :func:`_prim_rects`.
+    window : (x0, y0, x1, y1)
+        Pixel window to render, half-open.
+    depth, prim, label, surface : arrays, shape (H, W)
+        The z-buffer, updated in place.
+    """
+    x0, y0, x1, y1 = window
+    H, W = depth.shape
+    for j in range(len(prims)):
+        u0, v0, u1, v1 = rects[j]
+        if np.isnan(u0):
+            continue
+        # Pixel i covers [i - 0.5, i + 0.5]; keep those whose centre lies in the rect.
+        c0 = max(x0, int(np.ceil(max(u0, -1.0))))
+        r0 = max(y0, int(np.ceil(max(v0, -1.0))))
+        c1 = min(x1, int(np.floor(min(u1, W))) + 1)
+        r1 = min(y1, int(np.floor(min(v1, H))) + 1)
+        if c1 <= c0 or r1 <= r0:
+            continue
+        pixels = (slice(r0, r1), slice(c0, c1))
+        rays = grid.take(pixels)
+        s, code = _intersect(rays, world2norm[j], prims.kind[j], prims.taper[j])
+        if not grid.pinhole:
+            s += rays.depth0
+        s = s.reshape(r1 - r0, c1 - c0)
+        zbuf = depth[pixels]
+        closer = s < zbuf
+        np.copyto(zbuf, s, where=closer)
+        np.copyto(prim[pixels], np.int16(j), where=closer)
+        np.copyto(label[pixels], np.int16(prims.segment[j]), where=closer)
+        np.copyto(surface[pixels], _CURVED if code is None else code.reshape(s.shape),
+                  where=closer)
+
+
+def _cast_points(rays, uv, rects, prims, world2norm, depth, prim, surface):
+    """Cast rays through arbitrary pixels and keep the nearer hits, in place.
+
+    Parameters
+    ----------
+    rays : _Rays, shape (N,)
+    uv : array, shape (N, 2)
+        The pixels of the rays, tested against each primitive's rectangle.
+    rects : array, shape (P, 4)
+        From :func:`_prim_rects`.
+    depth, prim, surface : arrays, shape (N,)
+        The z-buffer, updated in place.
+    """
+    for j in range(len(prims)):
+        u0, v0, u1, v1 = rects[j]
+        if np.isnan(u0):
+            continue
+        inside = np.flatnonzero((uv[:, 0] >= u0) & (uv[:, 0] <= u1)
+                                & (uv[:, 1] >= v0) & (uv[:, 1] <= v1))
+        if inside.size == 0:
+            continue
+        sub = rays.take(inside)
+        s, code = _intersect(sub, world2norm[j], prims.kind[j], prims.taper[j])
+        if not rays.pinhole:
+            s += sub.depth0
+        closer = s < depth[inside]
+        hit = inside[closer]
+        depth[hit] = s[closer]
+        prim[hit] = j
+        surface[hit] = _CURVED if code is None else code[closer]
+
+
 def render(camera, seg2world, prims, *, bbox=None, want=("point", "normal")):
     """Render support map, depth, surface points and normals of a posed body in one view.
 
     Every pixel's ray is intersected with the primitives (a quadratic per primitive, Bregler &
-    Malik §2.3) and the nearest hit wins (z-buffer), giving Yamamoto et al.'s region and depth
-    images (§2.3, Fig. 4) and the 3D points behind them.
+    Malik §2.2) and the nearest hit wins (z-buffer), giving Yamamoto et al.'s region and depth
+    images (§2.4, Fig. 4) and the 3D points behind them.
 
     Parameters
     ----------
@@ -866,30 +982,9 @@ def render(camera, seg2world, prims, *, bbox=None, want=("point", "normal")):
     if len(prims) and x1 > x0 and y1 > y0:
         norm2world, world2norm = _world2norm(seg2world, prims)
         rects = _prim_rects(camera, norm2world, prims, grid.pinhole)
-        for j in range(len(prims)):
-            u0, v0, u1, v1 = rects[j]
-            if np.isnan(u0):
-                continue
-            # Pixel i covers [i - 0.5, i + 0.5]; keep those whose centre lies in the rect.
-            c0, r0 = max(x0, int(np.ceil(max(u0, -1.0)))), max(y0, int(np.ceil(max(v0, -1.0))))
-            c1 = min(x1, int(np.floor(min(u1, W))) + 1)
-            r1 = min(y1, int(np.floor(min(v1, H))) + 1)
-            if c1 <= c0 or r1 <= r0:
-                continue
-            window = (slice(r0, r1), slice(c0, c1))
-            rays = grid.take(window)
-            s, code = _intersect(rays, world2norm[j], prims.kind[j], prims.taper[j])
-            if not grid.pinhole:
-                s += rays.depth0
-            s = s.reshape(r1 - r0, c1 - c0)
-            if code is not None:
-                code = code.reshape(s.shape)
-            zbuf = depth[window]
-            closer = s < zbuf
-            np.copyto(zbuf, s, where=closer)
-            np.copyto(prim[window], np.int16(j), where=closer)
-            np.copyto(label[window], np.int16(prims.segment[j]), where=closer)
-            np.copyto(surface[window], _CURVED if code is None else code, where=closer)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            _cast_window(grid, rects, (x0, y0, x1, y1), prims, world2norm, depth, prim,
+                         label, surface)
 
     point = normal = None
     if want:
@@ -898,16 +993,15 @@ def render(camera, seg2world, prims, *, bbox=None, want=("point", "normal")):
 
 
 def render_points(camera, seg2world, prims, uv, *, want=("point", "normal")):
-    """Render the body at arbitrary pixel positions.
+    """Render the body at arbitrary pixel positions (sparse sampling, particle likelihoods).
 
-    Equal to :func:`render` at integer pixels; between pixel centres the rays are interpolated
-    bilinearly from the camera's ray grid (exact for an undistorted pinhole camera and for a
-    parallel projection).
+    Casts the camera's rays through ``uv`` (``camera.rays``); at pixel centres the result
+    equals :func:`render` there.
 
     Parameters
     ----------
     camera, seg2world, prims, want
-        As for :func:`render`.
+        As for :func:`render`; the camera also needs ``rays(uv) -> (origins, dirs)``.
     uv : array, shape (N, 2)
         Pixel positions (x right, y down, origin at the centre of the top-left pixel).
 
@@ -922,8 +1016,13 @@ def render_points(camera, seg2world, prims, uv, *, want=("point", "normal")):
         raise ZoopraxisError(f"render_points: uv must have shape (N, 2), got {uv.shape}")
     if not np.all(np.isfinite(uv)):
         raise ZoopraxisError("render_points: uv has non-finite entries")
-    grid, _ = _camera_grid(camera)
-    rays = _interpolate_rays(grid, uv)
+    _check_camera(camera)
+    if not hasattr(camera, "rays"):
+        raise ZoopraxisError(f"render_points: camera has no 'rays' "
+                             f"(got a {type(camera).__name__})")
+    origins, dirs = camera.rays(uv)
+    rays = _prepare_rays(np.asarray(origins, dtype=float), np.asarray(dirs, dtype=float),
+                         np.asarray(camera.R, dtype=float), np.asarray(camera.t, dtype=float))
     N = uv.shape[0]
 
     depth = np.full(N, np.inf, dtype=np.float32)
@@ -932,24 +1031,9 @@ def render_points(camera, seg2world, prims, uv, *, want=("point", "normal")):
     world2norm = None
     if len(prims) and N:
         norm2world, world2norm = _world2norm(seg2world, prims)
-        rects = _prim_rects(camera, norm2world, prims, grid.pinhole)
-        for j in range(len(prims)):
-            u0, v0, u1, v1 = rects[j]
-            if np.isnan(u0):
-                continue
-            inside = np.flatnonzero((uv[:, 0] >= u0) & (uv[:, 0] <= u1)
-                                    & (uv[:, 1] >= v0) & (uv[:, 1] <= v1))
-            if inside.size == 0:
-                continue
-            sub = rays.take(inside)
-            s, code = _intersect(sub, world2norm[j], prims.kind[j], prims.taper[j])
-            if not rays.pinhole:
-                s += sub.depth0
-            closer = s < depth[inside]
-            hit = inside[closer]
-            depth[hit] = s[closer]
-            prim[hit] = j
-            surface[hit] = _CURVED if code is None else code[closer]
+        rects = _prim_rects(camera, norm2world, prims, rays.pinhole)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            _cast_points(rays, uv, rects, prims, world2norm, depth, prim, surface)
 
     label = np.append(prims.segment, -1).astype(np.int16)[prim]
     point = normal = None

@@ -3,6 +3,10 @@
 import os
 from pathlib import Path
 
+# Small dense systems everywhere: BLAS threading only adds overhead (see __main__.py).
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
 import numpy as np
 import pytest
 

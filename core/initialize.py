@@ -1,0 +1,1405 @@
+"""Initialization from clicked joints (Bregler & Malik §2.6) and model fine-tuning (§2.7).
+
+The animator clicks the 2D joints of one or more anchor frames in one or more views. This module
+finds the body pose of each anchor frame, the joint angles and the body dimensions that put the
+model's 17 standard joints where the clicks are: "minimizing the sum of squared differences
+between the projected model joint locations and the user supplied model joint locations ... over
+the poses, angles, and body dimensions" (§2.6). Left and right dimensions are one number each
+(the body model ties them by construction), the angles are shared by all views of a frame, and
+the dimensions by all anchors.
+
+Two modes, as in the papers:
+
+- calibrated (Yamamoto et al.; Sidenbladh et al.): perspective cameras known; one world pose
+  (root) per anchor frame;
+- uncalibrated (Bregler & Malik §2.3): one scaled orthographic camera per view and anchor frame
+  ("the pose can be different" per view), the body root fixed at the identity, so the 3D result
+  lives in a body-centred frame.
+
+The problem is tri-linear (§2.6) and has mirror ambiguities, so it is solved from good starting
+points (triangulated joints; several orientations) by ``scipy.optimize.least_squares`` with
+analytic Jacobians, a robust loss on the clicks, bounds for the joint limits and the dimensions,
+and weak priors towards the rest angles and the default proportions (what the clicks cannot
+see, e.g. the split of a bend between the two spine joints, stays put). Clicks that look swapped
+left for right, outliers and a mirrored pose that fits as well are reported, not absorbed.
+
+:func:`refine_dims` is the building block of model fine-tuning (§2.7): the same joint problem
+over many tracked frames, where the tracker's projected joints are the observations.
+
+Convention: world Z up, metres; OpenCV cameras and pixels (``X_c = R @ X_w + t``). Body
+dimensions are the body model's ``LENGTH_DIMS`` (metres). Rotations in the parameter vectors
+are increments ``exp(w) @ R_start`` on the left (spatial), like ``Pose.retract``.
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import sparse
+from scipy.optimize import least_squares
+
+from . import se3
+from .body import (DEFAULT_DIMS, DIM_NAMES, LENGTH_DIMS, RADIUS_DIMS, Pose, make_body,
+                   reference_points)
+from .camera import PinholeCamera, ScaledOrthoCamera
+from .errors import ZoopraxisError
+from .joints import JOINT_INDEX, STANDARD_JOINTS
+
+N_JOINTS = len(STANDARD_JOINTS)
+
+# Clicks are a few pixels off; beyond this the robust loss (soft L1) grows linearly, so one bad
+# click pulls with a bounded force.
+LOSS_SCALE_PX = 3.0
+
+# Body dimensions stay inside these multiples of the template's defaults (adults and teenagers).
+DIMS_RANGE = (0.6, 1.5)
+
+# Prior weights, in pixels per unit of the quantity, relative to the image scale (pixels per
+# metre of the body, ``ppm``). An angle of 1 rad costs as much as 2 cm of click error, so an
+# angle the clicks see (a 30-40 cm segment moves 15-20 times more) is not biased, but an angle
+# they cannot see stays near rest. A dimension 10 % off its share of the body size costs 1 cm.
+ANGLE_PRIOR_M = 0.002
+DIMS_PRIOR_M = 0.1
+# Overall body size: weakly held at the template's in calibrated views (a single view cannot
+# tell size from distance), fixed in scaled orthographic views (the camera scale absorbs it).
+SIZE_PRIOR_M = {True: 0.2, False: 10.0}
+
+# Pairs whose clicks may be exchanged by mistake (subject's left and right).
+LR_PAIRS = tuple((f"l_{j}", f"r_{j}") for j in
+                 ("shoulder", "elbow", "wrist", "hip", "knee", "ankle", "toe"))
+
+# A joint this many pixels (and this many times the view's median error) off the fit is named.
+OUTLIER_PX = 4.0 * LOSS_SCALE_PX
+OUTLIER_RATIO = 5.0
+
+_ROOT_PARAMS = 6   # per frame: translation (3), rotation increment (3)
+_CAM_PARAMS = 6    # per scaled orthographic camera: log scale, rotation increment (3), shift (2)
+_MIN_VIEW_JOINTS = 4       # an uncalibrated view needs this many clicks to place its camera
+_MIN_FRAME_JOINTS = 6      # joints a frame needs in its best view to pose the body
+# Above this many Jacobian entries the solver works on a sparse matrix (frames couple only
+# through the dimensions).
+_DENSE_LIMIT = 3_000_000
+
+# The camera that sees the body's front in the reference configuration (facing -Y, Z up):
+# camera x = body +X (the subject's left on the image right), camera y = -Z, camera z = +Y.
+_FRONT = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+
+
+# ---------------------------------------------------------------------------------------------
+# Kinematics linear in the dimensions
+# ---------------------------------------------------------------------------------------------
+
+class _Kinematics:
+    """Standard joints of a template and their derivatives, batched over frames.
+
+    For fixed angles the joints are linear in the lengths (every joint centre of the reference
+    configuration is; the twists carry them linearly; §2.6 calls the whole problem tri-linear),
+    so one pass over the tree gives the joints, ``d joints / d angles`` (spatial twists, eq. 22)
+    and the exact ``d joints / d dims`` together. Frame: the body's own (root at the identity).
+    """
+
+    def __init__(self, template):
+        body = make_body(template)
+        zero = dict.fromkeys(DIM_NAMES, 0.0)
+        units = [reference_points({**zero, name: 1.0}) for name in LENGTH_DIMS]
+
+        def per_dim(point):
+            return np.stack([unit[point] for unit in units], axis=-1)      # (3, D)
+
+        self.template = template
+        self.structure = body
+        self.n_dofs = body.n_dofs
+        self.lower, self.upper = body.lower.copy(), body.upper.copy()
+        self.axes = body.dof_axes
+        self.parents = body.segment_parents
+        self.dof_segment = body.dof_segment
+        self.dofs_of_segment = [np.flatnonzero(body.dof_segment == k)
+                                for k in range(body.n_segments)]
+        self.pivots = np.stack([per_dim(j) for j in body.segment_joint])       # (S, 3, D)
+        self.landmark_segment = body.landmark_segment
+        self.landmarks = np.stack([per_dim(j) for j in STANDARD_JOINTS])       # (17, 3, D)
+        self.landmark_chain = body.chain[body.landmark_segment].astype(float)  # (17, n)
+        self.default_dims = np.array([DEFAULT_DIMS[n] for n in LENGTH_DIMS])
+
+    def forward(self, angles, dims):
+        """Joints in the body frame and their derivatives.
+
+        Parameters
+        ----------
+        angles : array, shape (B, n_dofs)
+        dims : array, shape (D,)
+            ``LENGTH_DIMS`` in metres.
+
+        Returns
+        -------
+        Y : array, shape (B, 17, 3)
+            Standard joints with the root at the identity.
+        dY_dangles : array, shape (B, 17, 3, n_dofs)
+        dY_ddims : array, shape (B, 17, 3, D)
+        """
+        angles = np.asarray(angles, dtype=float)
+        B, n = angles.shape
+        D = len(dims)
+        S = len(self.parents)
+        E = se3.exp_so3(self.axes * angles[..., None])                        # (B, n, 3, 3)
+        R_seg = np.empty((B, S, 3, 3))
+        trans_dims = np.empty((B, S, 3, D))     # segment translation, linear in the dims
+        pivot_dims = np.empty((B, S, 3, D))     # joint centre of the segment, in the body frame
+        axes_body = np.empty((B, n, 3))
+        eye = np.broadcast_to(np.eye(3), (B, 3, 3))
+        for k in range(S):
+            parent = self.parents[k]
+            R_parent = eye if parent < 0 else R_seg[:, parent]
+            t_parent = 0.0 if parent < 0 else trans_dims[:, parent]
+            R = R_parent
+            for j in self.dofs_of_segment[k]:
+                axes_body[:, j] = R @ self.axes[j]
+                R = R @ E[:, j]
+            R_seg[:, k] = R
+            # x -> R_parent (R_local (x - q) + q) + t_parent: every DOF of a segment turns
+            # about the same joint centre q.
+            pivot_dims[:, k] = R_parent @ self.pivots[k] + t_parent
+            trans_dims[:, k] = pivot_dims[:, k] - R @ self.pivots[k]
+        ls = self.landmark_segment
+        Y_dims = R_seg[:, ls] @ self.landmarks + trans_dims[:, ls]            # (B, 17, 3, D)
+        Y = Y_dims @ dims
+        pivots = pivot_dims[:, self.dof_segment] @ dims                       # (B, n, 3)
+        # eq. (22)-(23): a point moves by w' x (X - q') per unit of the angle, if DOF j is on
+        # the path from the root to the point's segment.
+        lever = Y[:, :, None, :] - pivots[:, None, :, :]                      # (B, 17, n, 3)
+        J = np.cross(axes_body[:, None], lever) * self.landmark_chain[None, :, :, None]
+        return Y, np.swapaxes(J, -1, -2), Y_dims
+
+    def start_angles(self):
+        """Angles to start a fit from: rest, knees and elbows slightly bent (off their limit)."""
+        angles = np.zeros(self.n_dofs)
+        for k, name in enumerate(self.structure.dof_names):
+            if name.endswith(("knee_flex", "elbow_flex")):
+                angles[k] = 0.15
+        return np.clip(angles, self.lower, self.upper)
+
+
+_KINEMATICS = {}
+
+
+def _kinematics(template):
+    if template not in _KINEMATICS:
+        _KINEMATICS[template] = _Kinematics(template)
+    return _KINEMATICS[template]
+
+
+# ---------------------------------------------------------------------------------------------
+# The joint problem
+# ---------------------------------------------------------------------------------------------
+
+@dataclass
+class _State:
+    """Everything the joint problem fits, for F frames and V views."""
+
+    dims: np.ndarray          # (D,)
+    size: float               # overall size relative to the template (the proportions' prior)
+    roots: np.ndarray         # (F, 4, 4) world_from_pelvis
+    angles: np.ndarray        # (F, n)
+    cameras: list             # F lists of V cameras (None where a view has no camera)
+
+    def copy(self):
+        return _State(self.dims.copy(), float(self.size), self.roots.copy(), self.angles.copy(),
+                      [list(row) for row in self.cameras])
+
+
+def _soft_l1(m_robust, c):
+    """Loss for least_squares (``f_scale = 1``): soft L1 of scale ``c`` pixels on the first
+    ``m_robust`` residuals (the clicks), plain squares on the priors after them."""
+
+    def loss(z):
+        rho = np.empty((3, z.size))
+        rho[0], rho[1], rho[2] = z, 1.0, 0.0
+        q = 1.0 + z[:m_robust] / c**2
+        root = np.sqrt(q)
+        rho[0, :m_robust] = 2.0 * c**2 * (root - 1.0)
+        rho[1, :m_robust] = 1.0 / root
+        rho[2, :m_robust] = -0.5 / (c**2 * q * root)
+        return rho
+
+    return loss
+
+
+class _Problem:
+    """Reprojection of the model joints over frames and views, as a least-squares problem.
+
+    Parameter vector: ``[dims (D), size]`` when the dimensions are fitted, then per frame
+    ``[root translation (3), root rotation increment (3)]`` when roots are free and the angles
+    when they are, then ``[log scale, rotation increment (3), image shift (2)]`` per free
+    (scaled orthographic) camera. Residuals: the weighted click errors (2 per clicked joint and
+    view, robust), then the priors.
+    """
+
+    def __init__(self, kin, obs, weights, state, *, free_root, free_angles=True, free_cams=None,
+                 fit_dims=True, calibrated=True, loss_scale=LOSS_SCALE_PX, dims_range=DIMS_RANGE):
+        self.kin = kin
+        self.obs = np.asarray(obs, dtype=float)                     # (F, V, 17, 2)
+        F, V = self.obs.shape[:2]
+        w = np.where(np.isfinite(self.obs).all(axis=-1), np.asarray(weights, float), 0.0)
+        self.mask = w > 0
+        self.sqrt_w = np.sqrt(w)
+        self.F, self.V = F, V
+        self.state = state.copy()
+        self.free_root = free_root
+        self.free_angles = free_angles
+        self.fit_dims = fit_dims
+        self.loss_scale = loss_scale
+        self.dims_range = dims_range
+        self.calibrated = calibrated
+        free_cams = np.zeros((F, V), bool) if free_cams is None else np.asarray(free_cams, bool)
+        self.cam_index = np.full((F, V), -1)
+        self.cam_index[free_cams] = np.arange(free_cams.sum())
+        self.free_pairs = np.argwhere(free_cams)                     # (C, 2) frame, view
+        D, n = len(state.dims), kin.n_dofs
+        self.D = D
+        self.frame_size = (_ROOT_PARAMS if free_root else 0) + (n if free_angles else 0)
+        self.off_frame = D + 1 if fit_dims else 0
+        self.off_cam = self.off_frame + F * self.frame_size
+        self.n_params = self.off_cam + _CAM_PARAMS * len(self.free_pairs)
+        self._index = np.argwhere(self.mask)                         # (M, 3) frame, view, joint
+        self.m_obs = 2 * len(self._index)
+        # Reference rotations: the parameters hold increments on them.
+        self.root_R = state.roots[:, :3, :3].copy()
+        cams = [state.cameras[f][v] for f, v in self.free_pairs]
+        self.cam_s = np.array([c.s for c in cams])
+        self.cam_R = np.array([c.R for c in cams]).reshape(-1, 3, 3)
+        self.cam_t = np.array([c.t[:2] for c in cams]).reshape(-1, 2)
+        self.cam_c = np.array([c.c for c in cams]).reshape(-1, 2)
+        self.ppm = self._pixels_per_metre()
+        self._cache_x = None
+
+    # -- parameters ---------------------------------------------------------------------------
+
+    def x0(self):
+        s = self.state
+        parts = []
+        if self.fit_dims:
+            parts += [s.dims, [s.size]]
+        frame = []
+        if self.free_root:
+            frame += [s.roots[:, :3, 3], np.zeros((self.F, 3))]
+        if self.free_angles:
+            frame += [s.angles]
+        if frame:
+            parts.append(np.concatenate(frame, axis=1).ravel())
+        parts.append(np.zeros(_CAM_PARAMS * len(self.free_pairs)))
+        x = np.concatenate([np.ravel(p) for p in parts])
+        lo, hi = self.bounds()
+        return np.clip(x, lo, hi)
+
+    def bounds(self):
+        lo = np.full(self.n_params, -np.inf)
+        hi = np.full(self.n_params, np.inf)
+        if self.fit_dims:
+            d0 = self.kin.default_dims
+            lo[:self.D], hi[:self.D] = self.dims_range[0] * d0, self.dims_range[1] * d0
+            lo[self.D], hi[self.D] = self.dims_range
+        if self.free_angles:
+            a0 = self.off_frame + (_ROOT_PARAMS if self.free_root else 0)
+            cols = a0 + np.arange(self.F)[:, None] * self.frame_size + np.arange(self.kin.n_dofs)
+            lo[cols] = self.kin.lower
+            hi[cols] = self.kin.upper
+        return lo, hi
+
+    def _split(self, x):
+        s = self.state
+        if self.fit_dims:
+            dims, size = x[:self.D], x[self.D]
+        else:
+            dims, size = s.dims, s.size
+        frame = x[self.off_frame:self.off_cam].reshape(self.F, self.frame_size)
+        if self.free_root:
+            p, w = frame[:, :3], frame[:, 3:6]
+            R = se3.exp_so3(w) @ self.root_R
+        else:
+            p, w, R = s.roots[:, :3, 3], None, s.roots[:, :3, :3]
+        angles = frame[:, -self.kin.n_dofs:] if self.free_angles else s.angles
+        cams = x[self.off_cam:].reshape(-1, _CAM_PARAMS)
+        return dims, size, p, w, R, angles, cams
+
+    def unpack(self, x):
+        """The state at parameter vector ``x``."""
+        dims, size, p, _, R, angles, cams = self._split(x)
+        out = self.state.copy()
+        out.dims, out.size = np.array(dims, float), float(size)
+        out.roots = np.tile(np.eye(4), (self.F, 1, 1))
+        out.roots[:, :3, :3] = se3.orthonormalize(R)
+        out.roots[:, :3, 3] = p
+        out.angles = np.clip(angles, self.kin.lower, self.kin.upper)
+        s, Rc, t = self._cam_params(cams)
+        for i, (f, v) in enumerate(self.free_pairs):
+            old = out.cameras[f][v]
+            out.cameras[f][v] = old.replace(s=s[i], R=se3.orthonormalize(Rc[i]),
+                                            t=np.array([t[i, 0], t[i, 1], old.t[2]]))
+        return out
+
+    def _cam_params(self, cams):
+        s = self.cam_s * np.exp(cams[:, 0])
+        R = se3.exp_so3(cams[:, 1:4]) @ self.cam_R
+        t = self.cam_t + cams[:, 4:6]
+        return s, R, t
+
+    # -- evaluation ---------------------------------------------------------------------------
+
+    def _joints(self, x):
+        """World joints (F, 17, 3) and their derivatives by the frame parameters and dims."""
+        dims, _, p, w, R, angles, _ = self._split(x)
+        Y, JA, Yd = self.kin.forward(angles, dims)
+        X = Y @ np.swapaxes(R, -1, -2) + p[:, None]
+        parts = []
+        if self.free_root:
+            RY = X - p[:, None]
+            J_rot = -se3.hat3(RY) @ se3.left_jacobian_so3(w)[:, None]
+            parts += [np.broadcast_to(np.eye(3), J_rot.shape), J_rot]
+        if self.free_angles:
+            parts.append(R[:, None] @ JA)
+        J_frame = np.concatenate(parts, axis=-1) if parts else np.zeros(X.shape + (0,))
+        return X, J_frame, R[:, None] @ Yd
+
+    def _project(self, X, cams):
+        """Pixels (F, V, 17, 2), ``d uv / d X`` (F, V, 17, 2, 3) and the free cameras'
+        derivatives (C, 17, 2, 6)."""
+        F, V = self.F, self.V
+        uv = np.full((F, V, N_JOINTS, 2), np.nan)
+        A = np.zeros((F, V, N_JOINTS, 2, 3))
+        free = self.cam_index >= 0
+        for v in range(V):
+            fixed = [f for f in range(F) if not free[f, v] and self.state.cameras[f][v] is not None
+                     and self.mask[f, v].any()]
+            if not fixed:
+                continue
+            first = self.state.cameras[fixed[0]][v]
+            if all(self.state.cameras[f][v] is first for f in fixed):
+                uv[fixed, v], A[fixed, v] = first.project_jacobian(X[fixed])
+            else:
+                for f in fixed:
+                    uv[f, v], A[f, v] = self.state.cameras[f][v].project_jacobian(X[f])
+        G = np.zeros((len(self.free_pairs), N_JOINTS, 2, _CAM_PARAMS))
+        if len(self.free_pairs):
+            s, Rc, t = self._cam_params(cams)
+            fi, vi = self.free_pairs.T
+            Xc = X[fi] @ np.swapaxes(Rc, -1, -2)                              # (C, 17, 3)
+            shifted = Xc[..., :2] + t[:, None]
+            uv[fi, vi] = s[:, None, None] * shifted + self.cam_c[:, None]
+            A[fi, vi] = (s[:, None, None] * Rc[:, :2])[:, None]
+            G[..., 0] = s[:, None, None] * shifted
+            rot = -se3.hat3(Xc) @ se3.left_jacobian_so3(cams[:, 1:4])[:, None]
+            G[..., 1:4] = s[:, None, None, None] * rot[..., :2, :]
+            G[..., 0, 4] = G[..., 1, 5] = s[:, None]
+        return uv, A, G
+
+    def evaluate(self, x):
+        """Residuals (m,) and the Jacobian (dense or CSR), cached for the last ``x``."""
+        if self._cache_x is not None and np.array_equal(x, self._cache_x):
+            return self._cache
+        dims, size, *_, cams = self._split(x)
+        X, J_frame, Xd = self._joints(x)
+        uv, A, G = self._project(X, cams)
+        fi, vi, ji = self._index.T
+        M = len(fi)
+        sw = self.sqrt_w[fi, vi, ji][:, None]
+        r_obs = (sw * (uv[fi, vi, ji] - self.obs[fi, vi, ji])).ravel()
+        Aw = A[fi, vi, ji] * sw[..., None]                                    # (M, 2, 3)
+        rows_obs = np.arange(2 * M).reshape(M, 2)
+        rows, cols, vals = [], [], []
+
+        def block(r, c, v):
+            r, c = np.broadcast_arrays(r, c)
+            rows.append(r.ravel())
+            cols.append(c.ravel())
+            vals.append(np.broadcast_to(v, r.shape).ravel())
+
+        if self.fit_dims:
+            block(rows_obs[..., None], np.arange(self.D), Aw @ Xd[fi, ji])
+        if self.frame_size:
+            c0 = self.off_frame + fi * self.frame_size
+            block(rows_obs[..., None], (c0[:, None] + np.arange(self.frame_size))[:, None],
+                  Aw @ J_frame[fi, ji])
+        ci = self.cam_index[fi, vi]
+        on = ci >= 0
+        if on.any():
+            c0 = self.off_cam + ci[on] * _CAM_PARAMS
+            block(rows_obs[on][..., None], (c0[:, None] + np.arange(_CAM_PARAMS))[:, None],
+                  G[ci[on], ji[on]] * sw[on][..., None])
+        # Priors (no robust loss): proportions, size, rest angles.
+        res = [r_obs]
+        row = 2 * M
+        if self.fit_dims:
+            d0 = self.kin.default_dims
+            wd = DIMS_PRIOR_M * self.ppm
+            res.append(wd * (dims / d0 - size))
+            r = row + np.arange(self.D)
+            block(r, np.arange(self.D), wd / d0)
+            block(r, self.D, -wd)
+            row += self.D
+            wk = SIZE_PRIOR_M[self.calibrated] * self.ppm
+            res.append([wk * (size - 1.0)])
+            block(row, self.D, wk)
+            row += 1
+        if self.free_angles:
+            n = self.kin.n_dofs
+            wa = ANGLE_PRIOR_M * self.ppm
+            angles = self._split(x)[5]
+            res.append(wa * angles.ravel())
+            a0 = self.off_frame + (_ROOT_PARAMS if self.free_root else 0)
+            cols_a = a0 + np.arange(self.F)[:, None] * self.frame_size + np.arange(n)
+            block(row + np.arange(self.F * n), cols_a.ravel(), wa)
+            row += self.F * n
+        r = np.concatenate([np.ravel(p) for p in res])
+        rows, cols, vals = (np.concatenate(a) for a in (rows, cols, vals))
+        if r.size * self.n_params <= _DENSE_LIMIT:
+            J = np.zeros((r.size, self.n_params))
+            J[rows, cols] = vals
+        else:
+            J = sparse.csr_matrix((vals, (rows, cols)), shape=(r.size, self.n_params))
+        self._cache_x, self._cache = x.copy(), (r, J)
+        return r, J
+
+    def _pixels_per_metre(self):
+        """Typical image scale of the body, from the start: ``|d uv / d X|`` per clicked joint."""
+        x = self.x0()
+        X, _, _ = self._joints(x)
+        _, A, _ = self._project(X, x[self.off_cam:].reshape(-1, _CAM_PARAMS))
+        fi, vi, ji = self._index.T
+        if len(fi) == 0:
+            return 1.0
+        norms = np.linalg.norm(A[fi, vi, ji], axis=(-2, -1)) / np.sqrt(2.0)
+        norms = norms[np.isfinite(norms)]
+        return float(np.median(norms)) if norms.size else 1.0
+
+    def solve(self, max_nfev=200):
+        """Run the robust fit; returns (state, cost) with cost in pixels squared."""
+        x0 = self.x0()
+        if self.n_params == 0 or self.m_obs == 0:
+            return self.state.copy(), 0.0
+        lo, hi = self.bounds()
+        dense = not sparse.issparse(self.evaluate(x0)[1])
+        result = least_squares(
+            lambda x: self.evaluate(x)[0], x0, jac=lambda x: self.evaluate(x)[1],
+            bounds=(lo, hi), method="trf", loss=_soft_l1(self.m_obs, self.loss_scale),
+            f_scale=1.0, x_scale="jac", max_nfev=max_nfev, xtol=1e-10, ftol=1e-10,
+            gtol=1e-10, tr_solver="exact" if dense else "lsmr")
+        return self.unpack(result.x), float(result.cost)
+
+    def errors(self, state=None):
+        """Click errors in pixels, (F, V, 17), NaN where not clicked."""
+        problem = self if state is None else _Problem(
+            self.kin, self.obs, self.sqrt_w**2, state, free_root=False, free_angles=False,
+            fit_dims=False, calibrated=self.calibrated)
+        x = problem.x0()
+        X, _, _ = problem._joints(x)
+        uv, _, _ = problem._project(X, x[problem.off_cam:].reshape(-1, _CAM_PARAMS))
+        err = np.linalg.norm(uv - problem.obs, axis=-1)
+        return np.where(problem.mask, err, np.nan)
+
+
+def _robust_cost(errors, c=LOSS_SCALE_PX):
+    """The fit's data term for click errors (pixels, NaN ignored): soft L1 per coordinate is
+    close to this per-point form, used to compare alternatives on the same clicks."""
+    e = errors[np.isfinite(errors)]
+    return float(np.sum(2.0 * c**2 * (np.sqrt(1.0 + e**2 / c**2) - 1.0)))
+
+
+def _fit(kin, obs, weights, state, **options):
+    max_nfev = options.pop("max_nfev", 200)
+    problem = _Problem(kin, obs, weights, state, **options)
+    fitted, cost = problem.solve(max_nfev=max_nfev)
+    return fitted, cost, problem
+
+
+# ---------------------------------------------------------------------------------------------
+# Geometry for starting points
+# ---------------------------------------------------------------------------------------------
+
+def triangulate(cameras, uv):
+    """Triangulate points clicked in several calibrated views (linear DLT, then no refinement).
+
+    Parameters
+    ----------
+    cameras : list of PinholeCamera, length V
+    uv : array, shape (V, N, 2)
+        Observed (distorted) pixels; NaN where a point is not seen in a view.
+
+    Returns
+    -------
+    X : array, shape (N, 3)
+        World points; NaN where fewer than two views see the point.
+    """
+    uv = np.asarray(uv, dtype=float)
+    V, N = uv.shape[:2]
+    A = np.zeros((N, 2 * V, 4))
+    seen = np.isfinite(uv).all(axis=-1)                                      # (V, N)
+    for v, cam in enumerate(cameras):
+        ideal = cam.undistort_points(np.where(seen[v, :, None], uv[v], 0.0))
+        xy1 = np.concatenate([ideal, np.ones((N, 1))], axis=-1) @ np.linalg.inv(cam.K).T
+        P = np.hstack([cam.R, cam.t[:, None]])                              # normalized camera
+        rows = np.stack([xy1[:, :1] * P[2] - P[0], xy1[:, 1:2] * P[2] - P[1]], axis=1)
+        A[:, 2 * v:2 * v + 2] = np.where(seen[v, :, None, None], rows, 0.0)
+    # Equal row norms make the algebraic error close to the angular one.
+    norms = np.linalg.norm(A, axis=-1, keepdims=True)
+    A = np.divide(A, norms, out=np.zeros_like(A), where=norms > 0)
+    Xh = np.linalg.svd(A)[2][:, -1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        X = Xh[:, :3] / Xh[:, 3:]
+    X[seen.sum(axis=0) < 2] = np.nan
+    return X
+
+
+def similarity_from_points(source, target, with_scale=True):
+    """Least-squares similarity ``target ~ scale * R @ source + t`` (Kabsch / Umeyama).
+
+    Parameters
+    ----------
+    source, target : array, shape (N, 3)
+        Corresponding points, N >= 3 not all on a line.
+    with_scale : bool
+
+    Returns
+    -------
+    R : array, shape (3, 3)
+    t : array, shape (3,)
+    scale : float
+    """
+    source = np.asarray(source, float)
+    target = np.asarray(target, float)
+    mu_s, mu_t = source.mean(axis=0), target.mean(axis=0)
+    a, b = source - mu_s, target - mu_t
+    U, sv, Vt = np.linalg.svd(b.T @ a)
+    d = np.sign(np.linalg.det(U @ Vt)) or 1.0
+    S = np.diag([1.0, 1.0, d])
+    R = U @ S @ Vt
+    scale = float(np.trace(np.diag(sv) @ S) / np.sum(a**2)) if with_scale else 1.0
+    return R, mu_t - scale * R @ mu_s, scale
+
+
+def procrustes_mpjpe(predicted, truth):
+    """Mean per-joint position error after the best similarity alignment (metres).
+
+    Parameters
+    ----------
+    predicted, truth : array, shape (N, 3)
+    """
+    R, t, s = similarity_from_points(predicted, truth)
+    return float(np.mean(np.linalg.norm(s * predicted @ R.T + t - truth, axis=-1)))
+
+
+def _rot_z(angle):
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _image_up(uv):
+    """Unit 2D direction from the hips to the neck / shoulders in one view, or None."""
+    def mean(names):
+        pts = uv[[JOINT_INDEX[n] for n in names]]
+        pts = pts[np.isfinite(pts).all(axis=-1)]
+        return pts.mean(axis=0) if len(pts) else None
+
+    low = mean(["pelvis"]) if np.isfinite(uv[JOINT_INDEX["pelvis"]]).all() \
+        else mean(["l_hip", "r_hip"])
+    high = mean(["neck"]) if np.isfinite(uv[JOINT_INDEX["neck"]]).all() \
+        else mean(["l_shoulder", "r_shoulder", "head"])
+    if low is None or high is None or np.linalg.norm(high - low) < 1e-6:
+        return None
+    d = high - low
+    return d / np.linalg.norm(d)
+
+
+_SCALE_BONES = (("pelvis", "neck"), ("l_hip", "l_knee"), ("r_hip", "r_knee"),
+                ("l_knee", "l_ankle"), ("r_knee", "r_ankle"), ("l_shoulder", "l_elbow"),
+                ("r_shoulder", "r_elbow"), ("l_elbow", "l_wrist"), ("r_elbow", "r_wrist"),
+                ("l_shoulder", "r_shoulder"), ("neck", "head"))
+
+
+def _image_scale(uv, Y):
+    """Pixels per metre of one view from clicked bone lengths: foreshortening only shortens
+    a bone, so the longest-looking bones (relative to their 3D length) give the scale."""
+    a = np.array([JOINT_INDEX[p] for p, _ in _SCALE_BONES])
+    b = np.array([JOINT_INDEX[q] for _, q in _SCALE_BONES])
+    length_2d = np.linalg.norm(uv[a] - uv[b], axis=-1)
+    length_3d = np.linalg.norm(Y[a] - Y[b], axis=-1)
+    ratio = length_2d / length_3d
+    ratio = np.sort(ratio[np.isfinite(ratio)])[::-1]
+    if ratio.size == 0:
+        pts = uv[np.isfinite(uv).all(axis=-1)]
+        return max(np.ptp(pts[:, 1]) / 1.6, 1.0) if len(pts) > 1 else 100.0
+    return float(np.median(ratio[:3]))
+
+
+def _ortho_camera(name, image_size, uv, Y, yaw, pitch=0.0):
+    """A scaled orthographic camera that sees body-frame joints ``Y`` turned by ``yaw`` about
+    the body's vertical, upright as the clicks ``uv`` are, at their scale and position."""
+    up = _image_up(uv)
+    # The front camera maps body +Z to image (0, -1); roll the image so it maps to ``up``.
+    roll = 0.0 if up is None else np.arctan2(up[1], up[0]) + np.pi / 2
+    c, s = np.cos(roll), np.sin(roll)
+    R_roll = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    cp, sp = np.cos(pitch), np.sin(pitch)
+    R_pitch = np.array([[1.0, 0.0, 0.0], [0.0, cp, -sp], [0.0, sp, cp]])
+    R = R_roll @ R_pitch @ _FRONT @ _rot_z(yaw)
+    scale = _image_scale(uv, Y)
+    centre = ((image_size[0] - 1) / 2, (image_size[1] - 1) / 2)
+    seen = np.isfinite(uv).all(axis=-1)
+    proj = Y @ R[:2].T
+    shift = np.mean((uv[seen] - centre) / scale - proj[seen], axis=0)
+    return ScaledOrthoCamera(name, image_size, scale, R=R, t=[shift[0], shift[1], 10.0], c=centre)
+
+
+# ---------------------------------------------------------------------------------------------
+# Results
+# ---------------------------------------------------------------------------------------------
+
+@dataclass
+class InitResult:
+    """What :func:`initialize` found.
+
+    Attributes
+    ----------
+    body : BodyModel
+        The template with the fitted dimensions (lengths fitted; radii scaled with the size).
+    poses : dict of int to Pose
+        Per anchor frame. Calibrated: world poses. Uncalibrated: root at the identity (a
+        body-centred frame) and the angles.
+    cameras : dict of str to camera
+        Calibrated: the given cameras. Uncalibrated: the fitted ScaledOrthoCamera of each view
+        at the first anchor frame.
+    view_cameras : dict of int to dict of str to ScaledOrthoCamera, or None
+        Uncalibrated: the fitted camera of every view at every anchor frame (one pose per view).
+    errors : dict of int to dict of str to array, shape (17,)
+        Click errors in pixels per frame and view, NaN where a joint was not clicked.
+    rms : dict of str to float
+        Root-mean-square click error per view over all anchors, pixels.
+    warnings : list of str
+        One line each: swapped or outlying clicks, views left out, a mirrored pose that fits.
+    ambiguous : bool
+        A mirrored (depth-flipped) pose fits about as well for some anchor frame.
+    calibrated : bool
+    swapped : list of (int, str, str, str)
+        ``(frame, view, joint, joint)`` click pairs fitted exchanged because they looked swapped.
+    """
+
+    body: object
+    poses: dict
+    cameras: dict
+    view_cameras: dict
+    errors: dict
+    rms: dict
+    warnings: list
+    ambiguous: bool
+    calibrated: bool
+    swapped: list = field(default_factory=list)
+
+    @property
+    def dims(self):
+        """Fitted lengths, ``{name: metres}`` over ``LENGTH_DIMS``."""
+        return {name: self.body.dims[name] for name in LENGTH_DIMS}
+
+    def joints3d(self, frame):
+        """Model joints of an anchor frame, (17, 3): world (calibrated) or body frame."""
+        return self.body.joints(self.poses[frame])
+
+    def to_json(self):
+        """The JSON object of an init.json file (``zoopraxis-init/1``)."""
+        def clean(a):
+            return [None if not np.isfinite(x) else round(float(x), 3) for x in a]
+
+        cams = self.view_cameras or {f: self.cameras for f in self.poses}
+        return {
+            "format": "zoopraxis-init/1",
+            "mode": "calibrated" if self.calibrated else "uncalibrated",
+            "template": self.body.template,
+            "dims": {k: round(float(v), 5) for k, v in self.body.dims.items()},
+            "dof_names": list(self.body.dof_names),
+            "joints": list(STANDARD_JOINTS),
+            "anchors": [{
+                "frame": int(f),
+                "pose": [round(float(x), 6) for x in pose.to_vector()],
+                "joints3d": np.round(self.joints3d(f), 5).tolist(),
+                "views": {v: {"camera": cams[f][v].to_dict(),
+                              "errors": clean(self.errors[f][v])}
+                          for v in self.errors[f]},
+            } for f, pose in sorted(self.poses.items())],
+            "rms": {v: round(float(x), 3) for v, x in self.rms.items()},
+            "warnings": list(self.warnings),
+            "ambiguous": bool(self.ambiguous),
+        }
+
+
+def init_from_json(data, path="init.json"):
+    """Rebuild an :class:`InitResult` from the JSON object of an init.json file.
+
+    Raises
+    ------
+    ZoopraxisError
+        A missing key or a wrong format, naming the file.
+    """
+    from .camera import camera_from_dict
+
+    if not isinstance(data, dict) or data.get("format") != "zoopraxis-init/1":
+        raise ZoopraxisError(f"{path}: not a zoopraxis-init/1 file")
+    for key in ("mode", "template", "dims", "anchors"):
+        if key not in data:
+            raise ZoopraxisError(f"{path}: missing required key '{key}'")
+    body = make_body(data["template"], data["dims"])
+    poses, view_cameras, errors = {}, {}, {}
+    for a in data["anchors"]:
+        for key in ("frame", "pose", "views"):
+            if key not in a:
+                raise ZoopraxisError(f"{path}: an anchor misses key '{key}'")
+        f = int(a["frame"])
+        vector = np.asarray(a["pose"], float)
+        if vector.shape != (6 + body.n_dofs,):
+            raise ZoopraxisError(f"{path}: frame {f}: pose has {vector.size} numbers, the "
+                                 f"'{body.template}' body needs {6 + body.n_dofs}")
+        poses[f] = Pose.from_vector(vector)
+        view_cameras[f] = {v: camera_from_dict(d["camera"], str(path))
+                           for v, d in a["views"].items()}
+        errors[f] = {v: np.array([np.nan if e is None else e for e in d.get("errors", [])],
+                                 float) for v, d in a["views"].items()}
+    calibrated = data["mode"] == "calibrated"
+    first = min(poses) if poses else None
+    return InitResult(body=body, poses=poses,
+                      cameras=view_cameras[first] if first is not None else {},
+                      view_cameras=None if calibrated else view_cameras, errors=errors,
+                      rms=dict(data.get("rms", {})), warnings=list(data.get("warnings", [])),
+                      ambiguous=bool(data.get("ambiguous", False)), calibrated=calibrated)
+
+
+# ---------------------------------------------------------------------------------------------
+# Initialization
+# ---------------------------------------------------------------------------------------------
+
+def _observations(anchors, views):
+    """Clicks as an array (F, V, 17, 2), NaN where not clicked."""
+    obs = np.full((len(anchors), len(views), N_JOINTS, 2), np.nan)
+    for f, anchor in enumerate(anchors):
+        for v, view in enumerate(views):
+            obs[f, v] = anchor.array(view)
+    return obs
+
+
+def _check_anchors(anchors, views):
+    if not anchors:
+        raise ZoopraxisError("no anchor frames: click the joints on a first frame")
+    for a in anchors:
+        best = max((a.joint_count(v) for v in views), default=0)
+        if best < _MIN_FRAME_JOINTS and _seen_twice(a, views) < _MIN_FRAME_JOINTS:
+            raise ZoopraxisError(
+                f"frame {a.frame}: at most {best} joints clicked in one view; click at least "
+                f"{_MIN_FRAME_JOINTS} joints in one view to pose the body")
+
+
+def _seen_twice(anchor, views):
+    count = {}
+    for v in views:
+        for j in anchor.views.get(v, {}):
+            count[j] = count.get(j, 0) + 1
+    return sum(1 for c in count.values() if c >= 2)
+
+
+def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None, fit_dims=True,
+               views=None):
+    """Pose, angles and body dimensions from the clicked joints of anchor frames (§2.6).
+
+    Parameters
+    ----------
+    anchors : list of markers.Anchor
+        Clicked joints per anchor frame and view (pixels).
+    cameras : dict of str to camera
+        Calibrated: the perspective cameras of the views. Uncalibrated: only their image sizes
+        are used (a camera or a ``(width, height)`` per view); may be None, then the clicks set
+        the principal point.
+    template : str
+        Body template (``body.TEMPLATES``).
+    calibrated : bool
+        Calibrated perspective views with one world pose per anchor, or Bregler & Malik's
+        uncalibrated mode with one scaled orthographic camera per view and anchor.
+    dims : dict, optional
+        Starting body dimensions (metres); defaults to the template's.
+    fit_dims : bool
+        Fit the lengths (shared by all anchors); otherwise keep ``dims``.
+    views : list of str, optional
+        The views to use; default all views of ``cameras`` (calibrated) or with clicks.
+
+    Returns
+    -------
+    result : InitResult
+
+    Raises
+    ------
+    ZoopraxisError
+        No anchors, a view without a camera, a frame with too few clicks.
+    """
+    anchors = sorted(anchors, key=lambda a: a.frame)
+    frames = [a.frame for a in anchors]
+    if len(set(frames)) != len(frames):
+        raise ZoopraxisError(f"frame {next(f for f in frames if frames.count(f) > 1)} has two "
+                             "anchors")
+    clicked = []
+    for a in anchors:
+        clicked += [v for v in a.views if a.joint_count(v) and v not in clicked]
+    if calibrated:
+        cameras = cameras or {}
+        for a in anchors:
+            for v in a.views:
+                if a.joint_count(v) and v not in cameras and (views is None or v in views):
+                    raise ZoopraxisError(
+                        f"frame {a.frame}: view '{v}' has no camera in the calibration "
+                        f"(cameras: {', '.join(cameras) or 'none'})")
+        views = list(views) if views is not None else list(cameras)
+        missing = [v for v in views if v not in cameras]
+        if missing:
+            raise ZoopraxisError(f"view '{missing[0]}' has no camera in the calibration "
+                                 f"(cameras: {', '.join(cameras) or 'none'})")
+    else:
+        views = list(views) if views is not None else \
+            list(cameras or {}) + [v for v in clicked if v not in (cameras or {})]
+    if not views:
+        raise ZoopraxisError("no views: give the cameras or click joints in some view")
+    _check_anchors(anchors, views)
+    kin = _kinematics(template)
+    dims0 = kin.default_dims.copy() if not dims else \
+        np.array([float(dims.get(n, DEFAULT_DIMS[n])) for n in LENGTH_DIMS])
+    obs = _observations(anchors, views)
+    weights = np.ones(obs.shape[:3])
+    warnings = []
+    if calibrated:
+        fit = _CalibratedFit(kin, obs, weights, [cameras[v] for v in views], views, anchors,
+                             dims0, fit_dims, warnings)
+    else:
+        sizes = [_image_size(cameras, v, obs[:, i]) for i, v in enumerate(views)]
+        fit = _UncalibratedFit(kin, obs, weights, sizes, views, anchors, dims0, fit_dims,
+                               warnings)
+    return fit.run()
+
+
+def _image_size(cameras, view, uv):
+    if cameras and view in cameras:
+        entry = cameras[view]
+        return tuple(int(x) for x in getattr(entry, "image_size", entry))
+    pts = uv[np.isfinite(uv).all(axis=-1)]
+    if len(pts) == 0:
+        return (640, 480)
+    # Without a size, centre the principal point on the clicks (it is redundant with the
+    # camera's image shift anyway).
+    return tuple(int(np.ceil(2 * x + 1)) for x in pts.mean(axis=0))
+
+
+class _Fit:
+    """Shared driver: starting points per anchor, the joint problem, checks of the clicks."""
+
+    calibrated = True
+
+    def __init__(self, kin, obs, weights, views, anchors, dims0, fit_dims, warnings):
+        self.kin = kin
+        self.obs = obs
+        self.weights = weights
+        self.views = views
+        self.anchors = anchors
+        self.frames = [a.frame for a in anchors]
+        self.dims0 = dims0
+        self.fit_dims = fit_dims
+        self.warnings = warnings
+        self.ambiguous = False
+        self.swapped = []
+
+    # Subclasses: start(f) -> _State for one frame (F = 1); mirrored(state, f) -> _State or None;
+    # options() -> dict of _Problem options; result(state) -> InitResult pieces.
+
+    def run(self):
+        states = [self._frame(f) for f in range(len(self.frames))]
+        state = self._merge(states)
+        state, cost = self._solve_all(state)
+        state = self._check_swaps(state, cost)
+        self._check_outliers(state)
+        return self._result(state)
+
+    def _frame(self, f):
+        """Best fit of one anchor frame alone, with its mirror checked."""
+        obs, w = self.obs[f:f + 1], self.weights[f:f + 1]
+        state = self.start(f)
+        state, cost, problem = _fit(self.kin, obs, w, state,
+                                    **self.options(state, f, fit_dims=self.fit_dims))
+        mirrored = self.mirrored(state, f)
+        if mirrored is not None:
+            alt, alt_cost, _ = _fit(self.kin, obs, w, mirrored,
+                                    **self.options(mirrored, f, fit_dims=self.fit_dims))
+            err = problem.errors(state)
+            alt_err = problem.errors(alt)
+            rms, alt_rms = _rms(err), _rms(alt_err)
+            if alt_cost < cost:
+                state, cost, rms, alt_rms = alt, alt_cost, alt_rms, rms
+            differ = self._pose_difference(state, alt)
+            if alt_rms <= 1.3 * rms + 0.5 and differ > 0.03:
+                self.ambiguous = True
+                self.warnings.append(
+                    f"frame {self.frames[f]}: the mirrored (depth-flipped) pose fits about as "
+                    f"well (rms {alt_rms:.1f} px vs {rms:.1f} px, joints {1000 * differ:.0f} mm "
+                    "apart); the 3D pose may be mirrored: click this frame in another view")
+        return state
+
+    def _pose_difference(self, a, b):
+        Ya = self.kin.forward(a.angles, a.dims)[0][0]
+        Yb = self.kin.forward(b.angles, b.dims)[0][0]
+        return procrustes_mpjpe(Ya, Yb)
+
+    def _merge(self, states):
+        dims = np.median([s.dims for s in states], axis=0)
+        size = float(np.median([s.size for s in states]))
+        return _State(dims, size, np.concatenate([s.roots for s in states]),
+                      np.concatenate([s.angles for s in states]),
+                      [s.cameras[0] for s in states])
+
+    def _solve_all(self, state, obs=None):
+        obs = self.obs if obs is None else obs
+        state, cost, _ = _fit(self.kin, obs, self.weights, state,
+                              **self.options(state, None, fit_dims=self.fit_dims))
+        return state, cost
+
+    def _check_swaps(self, state, cost):
+        """Find click pairs that look exchanged (left for right) in one view, §2.6's clicks.
+
+        A pair is a suspect when its two clicks lie far from the fit but each near the other's
+        projection, or, in a frame clicked in one view only (where a fit can bend to wrong
+        clicks), always. A suspect is confirmed when fitting with the pair exchanged lowers the
+        cost a lot; the fit then keeps the exchanged clicks and a warning names them.
+        """
+        err = self._errors(state)
+        proj = self._projections(state)
+        for f in range(len(self.frames)):
+            clicked_views = [v for v in range(len(self.views)) if np.isfinite(self.obs[f, v]).any()]
+            for v in clicked_views:
+                for left, right in LR_PAIRS:
+                    a, b = JOINT_INDEX[left], JOINT_INDEX[right]
+                    o = self.obs[f, v]
+                    if not (np.isfinite(o[a]).all() and np.isfinite(o[b]).all()):
+                        continue
+                    apart = np.linalg.norm(o[a] - o[b])
+                    if apart < 2 * LOSS_SCALE_PX:
+                        continue
+                    e_now = err[f, v, a] ** 2 + err[f, v, b] ** 2
+                    p = proj[f, v]
+                    e_swap = np.sum((p[a] - o[b]) ** 2) + np.sum((p[b] - o[a]) ** 2)
+                    suspect = (e_now > (2 * LOSS_SCALE_PX) ** 2 and e_swap < 0.3 * e_now) \
+                        or len(clicked_views) == 1
+                    if not suspect:
+                        continue
+                    obs = self.obs.copy()
+                    obs[f, v, [a, b]] = obs[f, v, [b, a]]
+                    alt, alt_cost = self._solve_all(state, obs)
+                    gain = cost - alt_cost
+                    if alt_cost < 0.6 * cost and gain > 2 * LOSS_SCALE_PX ** 2:
+                        alt_err = _Problem(self.kin, obs, self.weights, alt, free_root=False,
+                                           free_angles=False, fit_dims=False).errors()
+                        self.warnings.append(
+                            f"frame {self.frames[f]}, view {self.views[v]}: {left} and {right} "
+                            f"look swapped ({np.sqrt(e_now / 2):.1f} px from the fit, "
+                            f"{np.nanmax(alt_err[f, v, [a, b]]):.1f} px if exchanged); fitted "
+                            "them exchanged: check the clicks")
+                        self.swapped.append((self.frames[f], self.views[v], left, right))
+                        self.obs = obs
+                        state, cost = alt, alt_cost
+                        err = self._errors(state)
+                        proj = self._projections(state)
+        return state
+
+    def _check_outliers(self, state):
+        err = self._errors(state)
+        for f in range(len(self.frames)):
+            for v in range(len(self.views)):
+                e = err[f, v]
+                if not np.isfinite(e).any():
+                    continue
+                typical = np.nanmedian(e)
+                for j in np.flatnonzero(e > max(OUTLIER_PX, OUTLIER_RATIO * typical)):
+                    self.warnings.append(
+                        f"frame {self.frames[f]}, view {self.views[v]}: {STANDARD_JOINTS[j]} is "
+                        f"{e[j]:.1f} px from the fitted pose (view median {typical:.1f} px): "
+                        "check the click")
+
+    def _errors(self, state):
+        return _Problem(self.kin, self.obs, self.weights, state, free_root=False,
+                        free_angles=False, fit_dims=False).errors()
+
+    def _projections(self, state):
+        problem = _Problem(self.kin, self.obs, np.ones_like(self.weights), state,
+                           free_root=False, free_angles=False, fit_dims=False)
+        x = problem.x0()
+        X, _, _ = problem._joints(x)
+        return problem._project(X, x[problem.off_cam:].reshape(-1, _CAM_PARAMS))[0]
+
+    def _body(self, state):
+        lengths = dict(zip(LENGTH_DIMS, state.dims))
+        radii = {n: DEFAULT_DIMS[n] * state.size for n in RADIUS_DIMS}
+        return make_body(self.kin.template, {**lengths, **radii})
+
+    def _result(self, state):
+        err = self._errors(state)
+        body = self._body(state)
+        errors = {}
+        for f, frame in enumerate(self.frames):
+            errors[frame] = {view: err[f, v] for v, view in enumerate(self.views)
+                             if np.isfinite(err[f, v]).any()}
+        rms = {}
+        for v, view in enumerate(self.views):
+            e = err[:, v]
+            if np.isfinite(e).any():
+                rms[view] = float(np.sqrt(np.nanmean(e ** 2)))
+        poses = {frame: Pose(state.roots[f].copy(), body.clamp(state.angles[f]))
+                 for f, frame in enumerate(self.frames)}
+        cameras, view_cameras = self._cameras(state)
+        return InitResult(body=body, poses=poses, cameras=cameras, view_cameras=view_cameras,
+                          errors=errors, rms=rms, warnings=self.warnings,
+                          ambiguous=self.ambiguous, calibrated=self.calibrated,
+                          swapped=self.swapped)
+
+
+def _rms(err):
+    e = err[np.isfinite(err)]
+    return float(np.sqrt(np.mean(e ** 2))) if e.size else 0.0
+
+
+def _fit_3d(kin, target, dims, root, angles):
+    """Inverse kinematics: root and angles that put the joints on 3D points (metres).
+
+    Parameters
+    ----------
+    target : array, shape (17, 3)
+        NaN where unknown.
+    root : array, shape (4, 4)
+    angles : array, shape (n,)
+
+    Returns
+    -------
+    root : array, shape (4, 4)
+    angles : array, shape (n,)
+    """
+    seen = np.isfinite(target).all(axis=-1)
+    R0 = root[:3, :3]
+    n = kin.n_dofs
+
+    def fun(x):
+        R = se3.exp_so3(x[3:6]) @ R0
+        Y, JA, _ = kin.forward(x[None, 6:], dims)
+        X = Y[0] @ R.T + x[:3]
+        r = np.concatenate([(X - target)[seen].ravel(), ANGLE_PRIOR_M * x[6:]])
+        J_rot = -se3.hat3(X - x[:3]) @ se3.left_jacobian_so3(x[3:6])
+        J = np.concatenate([np.broadcast_to(np.eye(3), J_rot.shape), J_rot, R @ JA[0]],
+                           axis=-1)[seen].reshape(-1, 6 + n)
+        J = np.vstack([J, np.hstack([np.zeros((n, 6)), ANGLE_PRIOR_M * np.eye(n)])])
+        return r, J
+
+    lo = np.concatenate([np.full(6, -np.inf), kin.lower])
+    hi = np.concatenate([np.full(6, np.inf), kin.upper])
+    x0 = np.clip(np.concatenate([root[:3, 3], np.zeros(3), angles]), lo, hi)
+    res = least_squares(lambda x: fun(x)[0], x0, jac=lambda x: fun(x)[1], bounds=(lo, hi),
+                        method="trf", loss="soft_l1", f_scale=0.05, x_scale="jac",
+                        max_nfev=100)
+    out = se3.transform(se3.orthonormalize(se3.exp_so3(res.x[3:6]) @ R0), res.x[:3])
+    return out, np.clip(res.x[6:], kin.lower, kin.upper)
+
+
+class _CalibratedFit(_Fit):
+    """Calibrated views: one world pose per anchor frame."""
+
+    calibrated = True
+
+    def __init__(self, kin, obs, weights, cameras, views, anchors, dims0, fit_dims, warnings):
+        super().__init__(kin, obs, weights, views, anchors, dims0, fit_dims, warnings)
+        self.cams = cameras
+
+    def options(self, state, f, fit_dims):
+        return dict(free_root=True, fit_dims=fit_dims, calibrated=True)
+
+    def _state(self, root, angles, dims, size=1.0):
+        return _State(np.array(dims, float), size, root[None].copy(), angles[None].copy(),
+                      [list(self.cams)])
+
+    def start(self, f):
+        kin = self.kin
+        obs = self.obs[f]
+        X = triangulate(self.cams, obs)
+        angles0 = kin.start_angles()
+        Y_rest = kin.forward(angles0[None], self.dims0)[0][0]
+        torso = [JOINT_INDEX[n] for n in ("pelvis", "l_hip", "r_hip", "neck", "l_shoulder",
+                                           "r_shoulder", "head")]
+        ok = [j for j in torso if np.isfinite(X[j]).all()]
+        if len(ok) >= 3 and np.linalg.matrix_rank(X[ok] - X[ok].mean(axis=0), tol=0.02) >= 2:
+            R, t, scale = similarity_from_points(Y_rest[ok], X[ok])
+            scale = float(np.clip(scale, *DIMS_RANGE))
+            dims = self.dims0 * scale
+            root, angles = _fit_3d(kin, X, dims, se3.transform(R, t), angles0)
+            return self._state(root, angles, dims, scale)
+        return self._multistart(f, angles0, Y_rest)
+
+    def _multistart(self, f, angles0, Y_rest):
+        """Few views see the torso: try upright roots turned every 45 degrees about Z, each
+        placed on the ray through the clicked pelvis at the depth its size suggests."""
+        obs, w = self.obs[f:f + 1], self.weights[f:f + 1]
+        counts = np.isfinite(obs[0]).all(axis=-1).sum(axis=-1)
+        v = int(np.argmax(counts))
+        cam, uv = self.cams[v], obs[0, v]
+        seen = np.isfinite(uv).all(axis=-1)
+        ppm = _image_scale(uv, Y_rest)
+        depth = cam.K[0, 0] / ppm
+        anchor_px = uv[JOINT_INDEX["pelvis"]] if seen[JOINT_INDEX["pelvis"]] \
+            else uv[seen].mean(axis=0)
+        centre = cam.unproject(anchor_px, depth)
+        best = None
+        for yaw in np.radians(np.arange(0, 360, 45)):
+            root = se3.transform(_rot_z(yaw), centre)
+            state = self._state(root, angles0, self.dims0)
+            fitted, cost, _ = _fit(self.kin, obs, w, state, free_root=True, fit_dims=False,
+                                   max_nfev=60)
+            if best is None or cost < best[1]:
+                best = (fitted, cost)
+        return best[0]
+
+    def mirrored(self, state, f):
+        """The depth-flipped pose of a frame clicked in one view only (else None): the joints
+        reflected in the plane through the pelvis facing the camera."""
+        clicked = [v for v in range(len(self.views)) if np.isfinite(self.obs[f, v]).any()]
+        if len(clicked) != 1:
+            return None
+        cam = self.cams[clicked[0]]
+        Y = self.kin.forward(state.angles, state.dims)[0][0]
+        X = Y @ state.roots[0, :3, :3].T + state.roots[0, :3, 3]
+        pelvis = X[JOINT_INDEX["pelvis"]]
+        n = pelvis - cam.center
+        n /= np.linalg.norm(n)
+        target = X - 2.0 * ((X - pelvis) @ n)[:, None] * n
+        R, t, _ = similarity_from_points(Y, target, with_scale=False)
+        root, angles = _fit_3d(self.kin, target, state.dims, se3.transform(R, t),
+                               self.kin.start_angles())
+        return self._state(root, angles, state.dims, state.size)
+
+    def _cameras(self, state):
+        return dict(zip(self.views, self.cams)), None
+
+
+class _UncalibratedFit(_Fit):
+    """Uncalibrated views (Bregler & Malik §2.3): a scaled orthographic camera per view and
+    anchor, the body root at the identity, angles shared by the views of a frame."""
+
+    calibrated = False
+
+    def __init__(self, kin, obs, weights, sizes, views, anchors, dims0, fit_dims, warnings):
+        super().__init__(kin, obs, weights, views, anchors, dims0, fit_dims, warnings)
+        self.sizes = sizes
+        counts = np.isfinite(obs).all(axis=-1).sum(axis=-1)               # (F, V)
+        self.usable = counts >= _MIN_VIEW_JOINTS
+        for f, v in np.argwhere((counts > 0) & ~self.usable):
+            warnings.append(f"frame {anchors[f].frame}, view {views[v]}: only {counts[f, v]} "
+                            f"joints clicked (need {_MIN_VIEW_JOINTS} to place an uncalibrated "
+                            "view); view left out of this frame")
+            self.weights[f, v] = 0.0
+
+    def options(self, state, f, fit_dims):
+        free = np.array([[c is not None for c in row] for row in state.cameras])
+        return dict(free_root=False, free_cams=free, fit_dims=fit_dims, calibrated=False)
+
+    def start(self, f):
+        """Best single-view fit over body turns, then each other view's camera alone."""
+        kin = self.kin
+        obs, w = self.obs[f:f + 1], self.weights[f:f + 1]
+        views = list(np.flatnonzero(self.usable[f]))
+        counts = np.isfinite(obs[0]).all(axis=-1).sum(axis=-1)
+        views.sort(key=lambda v: -counts[v])
+        angles0 = kin.start_angles()
+        Y = kin.forward(angles0[None], self.dims0)[0][0]
+        first = views[0]
+        best = None
+        for yaw in np.radians(np.arange(0, 360, 45)):
+            cams = [None] * len(self.views)
+            cams[first] = _ortho_camera(self.views[first], self.sizes[first], obs[0, first], Y,
+                                        yaw)
+            state = _State(self.dims0.copy(), 1.0, np.eye(4)[None], angles0[None].copy(), [cams])
+            only = np.zeros_like(w)
+            only[0, first] = w[0, first]
+            fitted, cost, _ = _fit(kin, obs, only, state, free_root=False, fit_dims=False,
+                                   free_cams=np.array([[c is not None for c in cams]]),
+                                   calibrated=False, max_nfev=60)
+            if best is None or cost < best[1]:
+                best = (fitted, cost)
+        state = best[0]
+        Y = kin.forward(state.angles, state.dims)[0][0]
+        for v in views[1:]:
+            state.cameras[0][v] = self._place_camera(state, f, v, Y)
+        return state
+
+    def _place_camera(self, state, f, v, Y):
+        """Camera of view ``v`` alone for a known body: the best over turns and tilts."""
+        obs = self.obs[f:f + 1]
+        only = np.zeros_like(self.weights[f:f + 1])
+        only[0, v] = self.weights[f, v]
+        best = None
+        for yaw in np.radians(np.arange(0, 360, 30)):
+            for pitch in np.radians((-30.0, 0.0, 30.0)):
+                trial = state.copy()
+                trial.cameras[0][v] = _ortho_camera(self.views[v], self.sizes[v], obs[0, v], Y,
+                                                    yaw, pitch)
+                free = np.zeros((1, len(self.views)), bool)
+                free[0, v] = True
+                fitted, cost, _ = _fit(self.kin, obs, only, trial, free_root=False,
+                                       free_angles=False, free_cams=free, fit_dims=False,
+                                       calibrated=False, max_nfev=40)
+                if best is None or cost < best[1]:
+                    best = (fitted.cameras[0][v], cost)
+        return best[0]
+
+    def mirrored(self, state, f):
+        """The depth-flipped pose: the joints reflected in the first view's image plane, posed
+        again by inverse kinematics, with every view's camera turned to see the same image."""
+        views = [v for v in range(len(self.views)) if state.cameras[0][v] is not None]
+        n = state.cameras[0][views[0]].R[2]
+        Y = self.kin.forward(state.angles, state.dims)[0][0]
+        M = np.eye(3) - 2.0 * np.outer(n, n)
+        target = Y @ M
+        R, t, _ = similarity_from_points(Y, target, with_scale=False)
+        root, angles = _fit_3d(self.kin, target, state.dims, se3.transform(R, t),
+                               self.kin.start_angles())
+        out = _State(state.dims.copy(), state.size, np.eye(4)[None], angles[None],
+                     [list(state.cameras[0])])
+        for v in views:
+            cam = state.cameras[0][v]
+            # image = s (R_v Y + t_v)_xy and Y ~ M (R_T Y' + p_T): the new camera keeps the
+            # first two rows of R_v M R_T (any such pair completes to a rotation).
+            rows = cam.R @ M @ root[:3, :3]
+            R_new = np.vstack([rows[:2], np.cross(rows[0], rows[1])])
+            shift = cam.t[:2] + (cam.R @ M @ root[:3, 3])[:2]
+            out.cameras[0][v] = cam.replace(R=R_new, t=[shift[0], shift[1], cam.t[2]])
+        return out
+
+    def _cameras(self, state):
+        view_cameras = {}
+        for f, frame in enumerate(self.frames):
+            view_cameras[frame] = {view: state.cameras[f][v] for v, view in enumerate(self.views)
+                                   if state.cameras[f][v] is not None}
+        return dict(view_cameras[self.frames[0]]), view_cameras
+
+
+# ---------------------------------------------------------------------------------------------
+# Model fine-tuning (§2.7)
+# ---------------------------------------------------------------------------------------------
+
+@dataclass
+class RefineResult:
+    """What :func:`refine_dims` found.
+
+    Attributes
+    ----------
+    body : BodyModel
+        With the refined lengths.
+    poses : dict of int to Pose
+    cameras : dict
+        As given, or per frame with the refined scaled orthographic cameras.
+    rms : dict of str to float
+        Root-mean-square observation error per view, pixels (unweighted).
+    """
+
+    body: object
+    poses: dict
+    cameras: dict
+    rms: dict
+
+
+def refine_dims(body, poses_by_frame, observations, cameras, *, weights=None, fit_poses=True,
+                loss_scale=LOSS_SCALE_PX, dims_range=DIMS_RANGE):
+    """Refine the body dimensions (and the poses) over many frames: model fine-tuning (§2.7).
+
+    One joint problem over all frames: the lengths are shared, every frame has its own pose,
+    and the projected model joints should meet the 2D joint observations (the tracker's
+    projected joints, the anchors' clicks) with the given weights.
+
+    Parameters
+    ----------
+    body : BodyModel
+        Current model; its lengths are the start, its template is kept.
+    poses_by_frame : dict of int to Pose
+    observations : dict of int to dict of str to array, shape (17, 2)
+        2D joints per frame and view, pixels; NaN where not observed.
+    cameras : dict of str to camera, or dict of int to dict of str to camera
+        Static cameras per view: the roots and angles are refined. Or cameras per frame and
+        view (Bregler & Malik's one pose per view): scaled orthographic ones are refined with
+        the angles and the roots stay as given.
+    weights : dict of int to dict of str to array, shape (17,), optional
+        Confidence of each observation (default 1).
+    fit_poses : bool
+        Refine the poses too; otherwise only the dimensions move.
+    loss_scale : float
+        Robust loss scale, pixels.
+    dims_range : (float, float)
+        Bounds of the lengths as multiples of the template's defaults.
+
+    Returns
+    -------
+    result : RefineResult
+
+    Raises
+    ------
+    ZoopraxisError
+        A frame without a pose, a view without a camera, a wrongly shaped observation.
+    """
+    frames = sorted(observations)
+    if not frames:
+        raise ZoopraxisError("refine_dims: no observations")
+    per_frame = all(isinstance(k, (int, np.integer)) for k in cameras) and bool(cameras)
+    views = []
+    for f in frames:
+        if f not in poses_by_frame:
+            raise ZoopraxisError(f"refine_dims: frame {f} has observations but no pose")
+        views += [v for v in observations[f] if v not in views]
+    obs = np.full((len(frames), len(views), N_JOINTS, 2), np.nan)
+    w = np.ones(obs.shape[:3])
+    cams = []
+    for i, f in enumerate(frames):
+        row = []
+        for k, v in enumerate(views):
+            if v in observations[f]:
+                a = np.asarray(observations[f][v], float)
+                if a.shape != (N_JOINTS, 2):
+                    raise ZoopraxisError(f"refine_dims: frame {f}, view {v}: observations must "
+                                         f"have shape (17, 2), got {a.shape}")
+                obs[i, k] = a
+                if weights is not None and f in weights and v in weights[f]:
+                    w[i, k] = np.asarray(weights[f][v], float)
+            source = cameras.get(f, {}) if per_frame else cameras
+            if v not in source and np.isfinite(obs[i, k]).any():
+                where = f"frame {f}, " if per_frame else ""
+                raise ZoopraxisError(f"refine_dims: {where}view {v} has no camera")
+            row.append(source.get(v))
+        cams.append(row)
+    kin = _kinematics(body.template)
+    dims = body.dims_vector(LENGTH_DIMS)
+    size = float(np.median(dims / kin.default_dims))
+    state = _State(dims, size, np.array([poses_by_frame[f].root for f in frames]),
+                   np.array([poses_by_frame[f].angles for f in frames]), cams)
+    free_cams = np.array([[per_frame and isinstance(c, ScaledOrthoCamera) and fit_poses
+                           for c in row] for row in cams])
+    calibrated = not free_cams.any()
+    fitted, _, problem = _fit(kin, obs, w, state, free_root=fit_poses and not free_cams.any(),
+                              free_angles=fit_poses, free_cams=free_cams, fit_dims=True,
+                              calibrated=calibrated, loss_scale=loss_scale,
+                              dims_range=dims_range)
+    lengths = dict(zip(LENGTH_DIMS, fitted.dims))
+    radii = {n: body.dims[n] * fitted.size / size for n in RADIUS_DIMS}
+    new_body = body.with_dims({**lengths, **radii})
+    poses = {f: Pose(fitted.roots[i].copy(), new_body.clamp(fitted.angles[i]))
+             for i, f in enumerate(frames)}
+    err = problem.errors(fitted)
+    rms = {v: float(np.sqrt(np.nanmean(err[:, k] ** 2))) for k, v in enumerate(views)
+           if np.isfinite(err[:, k]).any()}
+    if per_frame:
+        out_cams = {f: {v: fitted.cameras[i][k] for k, v in enumerate(views)
+                        if fitted.cameras[i][k] is not None} for i, f in enumerate(frames)}
+    else:
+        out_cams = dict(cameras)
+    return RefineResult(new_body, poses, out_cams, rms)
+
+
+__all__ = ["initialize", "InitResult", "init_from_json", "refine_dims", "RefineResult",
+           "triangulate", "similarity_from_points", "procrustes_mpjpe", "LR_PAIRS",
+           "LOSS_SCALE_PX", "DIMS_RANGE"]

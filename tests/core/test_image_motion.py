@@ -1,0 +1,128 @@
+"""Image terms: per-segment normal equations equal the full Jacobian's, and are right."""
+
+import numpy as np
+import pytest
+
+from zoopraxis.core import image_motion as im
+from zoopraxis.core import se3
+from zoopraxis.core.body import Pose, make_body
+from zoopraxis.core.camera import PinholeCamera, ScaledOrthoCamera, look_at
+
+
+def smooth_image(rng, h=120, w=160):
+    import cv2
+
+    small = rng.uniform(0, 1, size=(h // 8 + 2, w // 8 + 2)).astype(np.float32)
+    return cv2.resize(small, (w, h), interpolation=cv2.INTER_CUBIC)
+
+
+@pytest.fixture
+def setup(rng):
+    body = make_body("full")
+    pose = Pose(se3.transform(p=[0, 0, 0.95]), np.zeros(body.n_dofs))
+    pose.angles[body.dof_index("l_knee_flex")] = 0.4
+    R, t = look_at([0.3, -3.0, 1.0], [0, 0, 0.8])
+    cam = PinholeCamera("c", (160, 120), [[150, 0, 79.5], [0, 150, 59.5], [0, 0, 1]],
+                        dist=[-0.1, 0.02, 0.001, -0.001, 0], R=R, t=t)
+    n = 300
+    seg = rng.integers(0, body.n_segments, size=n)
+    ref = body.reference_point("pelvis") + rng.normal(0, 0.3, size=(n, 3))
+    term = im.Term(0, seg, ref, rng.uniform(0, 1, n), rng.uniform(0.5, 1, n), 0.1, "flow")
+    stack = im.image_with_gradients(smooth_image(rng))
+    return body, pose, cam, term, stack
+
+
+def residuals(body, pose, cam, term, stack):
+    X = se3.apply(body.seg2world(pose)[term.segment], term.ref_points)
+    vals, inside = im.sample(stack, cam.project(X))
+    return vals[:, 0] - term.target, inside
+
+
+def test_term_groups_points_by_segment(setup):
+    _, _, _, term, _ = setup
+    assert np.all(np.diff(term.segment) >= 0)
+    for k, lo, hi in term.groups:
+        assert np.all(term.segment[lo:hi] == k)
+
+
+def test_normal_equations_equal_the_full_jacobian_products(setup):
+    """Accumulating 6x6 blocks per segment gives exactly J^T W J and J^T W r of the full
+    (pixels x parameters) Jacobian built row by row (eqs. 24-26)."""
+    body, pose, cam, term, stack = setup
+    seg2world, seg_jac = body.kinematics(pose)
+    acc = im.accumulate(term, stack, cam, seg2world, body.n_segments, robust=False)
+    P = body.n_params
+    H, g = im.assemble(acc, seg_jac, root_cols=np.arange(6), angle_cols=np.arange(6, P),
+                       n_params=P)
+    X = se3.apply(seg2world[term.segment], term.ref_points)
+    uv, Jp = cam.project_jacobian(X)
+    vals, inside = im.sample(stack, uv)
+    rows = np.einsum("ni,nij,njk,nkp->np", vals[:, 1:3].astype(float), Jp,
+                     se3.point_velocity_matrix(X), seg_jac[term.segment])
+    w = term.weight * inside
+    assert np.allclose(H, (rows * w[:, None]).T @ rows, rtol=1e-6, atol=1e-9)
+    assert np.allclose(g, (rows * w[:, None]).T @ acc.residual, rtol=1e-6, atol=1e-9)
+
+
+def test_linearisation_against_finite_differences(setup):
+    """On a smooth image the analytic rows predict how residuals change with the pose."""
+    body, pose, cam, term, _ = setup
+    uu, vv = np.meshgrid(np.arange(160), np.arange(120))
+    stack = im.image_with_gradients((np.sin(uu / 7.0) + np.cos(vv / 9.0)).astype(np.float32))
+    seg2world, seg_jac = body.kinematics(pose)
+    X = se3.apply(seg2world[term.segment], term.ref_points)
+    uv, Jp = cam.project_jacobian(X)
+    vals, inside = im.sample(stack, uv)
+    rows = np.einsum("ni,nij,njk,nkp->np", vals[:, 1:3].astype(float), Jp,
+                     se3.point_velocity_matrix(X), seg_jac[term.segment])
+    P = body.n_params
+    h = 1e-4
+    for i in (0, 2, 4, 6 + body.dof_index("l_knee_flex"), 6 + body.dof_index("r_hip_abd")):
+        d = np.zeros(P)
+        d[i] = h
+        rp, okp = residuals(body, pose.retract(d), cam, term, stack)
+        rm, okm = residuals(body, pose.retract(-d), cam, term, stack)
+        ok = inside & okp & okm & (np.abs(rows[:, i]) > 1e-3)
+        fd = (rp - rm)[ok] / (2 * h)
+        assert np.median(np.abs(fd - rows[ok, i]) / np.abs(rows[ok, i])) < 0.1
+
+
+def test_scale_column_for_orthographic_views(rng):
+    body = make_body("muybridge")
+    pose = Pose(se3.transform(p=[0, 0, 5.0]), np.zeros(body.n_dofs))
+    cam = ScaledOrthoCamera("o", (160, 120), s=60.0)
+    n = 200
+    term = im.Term(0, rng.integers(0, body.n_segments, n), rng.normal(0, 0.3, (n, 3)),
+                   rng.uniform(0, 1, n), np.ones(n), 0.1)
+    stack = im.image_with_gradients(smooth_image(rng))
+    seg2world, seg_jac = body.kinematics(pose)
+    acc = im.accumulate(term, stack, cam, seg2world, body.n_segments, with_scale=True,
+                        robust=False)
+    # d residual / d log s by finite differences of the camera scale
+    h = 1e-3
+
+    def res(s):
+        X = se3.apply(seg2world[term.segment], term.ref_points)
+        vals, _ = im.sample(stack, cam.replace(s=s).project(X))
+        return vals[:, 0] - term.target
+
+    d = (res(60.0 * np.exp(h)) - res(60.0 * np.exp(-h))) / (2 * h)
+    b_scale = acc.b[:, 6].sum()
+    assert np.isclose(b_scale, np.sum(d * acc.residual), rtol=0.05)
+
+
+def test_hinge_terms_only_count_outside(rng):
+    body = make_body("full")
+    pose = body.rest_pose(se3.transform(p=[0, 0, 0.95]))
+    cam = ScaledOrthoCamera("o", (160, 120), s=50.0, R=look_at([0, -5, 1], [0, 0, 1])[0],
+                            t=look_at([0, -5, 1], [0, 0, 1])[1])
+    stack = im.image_with_gradients(np.full((120, 160), -5.0, np.float32))  # all "inside"
+    term = im.Term(0, np.zeros(10, int), np.zeros((10, 3)), np.zeros(10), np.ones(10), 3.0,
+                   hinge=1.0)
+    acc = im.accumulate(term, stack, cam, body.seg2world(pose), body.n_segments)
+    assert acc.cost == 0.0 and np.allclose(acc.A, 0.0)
+
+
+def test_geman_mcclure_downweights_outliers():
+    w = im.geman_mcclure_weights(np.array([0.0, 0.1, 1.0]), 0.1)
+    assert w[0] == 1.0 and 0 < w[2] < w[1] < 1
