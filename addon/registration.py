@@ -12,7 +12,7 @@ import bpy
 
 from . import preferences
 
-MODULES = ()
+MODULES = ("props", "operators", "panels")
 
 CLI_COMMAND = "zoopraxis"
 

@@ -50,7 +50,7 @@ class Settings:
     silhouette_margin: float = 1.0    # contour may stray this far outside the silhouette, px
     em: bool = True                   # EM refinement of the support maps
     velocity: float = 0.5             # fraction of the last motion used to predict the next
-    prior_weight: float = 0.05        # pull towards the prediction, relative to the data
+    prior_weight: float = 0.01        # pull towards the prediction, relative to the data
     damping: float = 1e-3             # initial Levenberg-Marquardt damping
 
 

@@ -53,15 +53,30 @@ LOSS_SCALE_PX = 3.0
 # Body dimensions stay inside these multiples of the template's defaults (adults and teenagers).
 DIMS_RANGE = (0.6, 1.5)
 
-# Prior weights, in pixels per unit of the quantity, relative to the image scale (pixels per
-# metre of the body, ``ppm``). An angle of 1 rad costs as much as 2 cm of click error, so an
-# angle the clicks see (a 30-40 cm segment moves 15-20 times more) is not biased, but an angle
-# they cannot see stays near rest. A dimension 10 % off its share of the body size costs 1 cm.
-ANGLE_PRIOR_M = 0.002
-DIMS_PRIOR_M = 0.1
-# Overall body size: weakly held at the template's in calibrated views (a single view cannot
-# tell size from distance), fixed in scaled orthographic views (the camera scale absorbs it).
-SIZE_PRIOR_M = {True: 0.2, False: 10.0}
+# Priors, as in a maximum a posteriori fit: a quantity one prior spread away from its mean
+# costs as much as one typical click error. What the clicks see well is not biased; what they
+# cannot see (the split of a bend between the two spine joints, an arm's roll while the elbow
+# is straight, the depth sign of a bone in a single view) takes the likelier value.
+CLICK_SIGMA_PX = 2.0
+# Mean and spread (degrees) of joint angles in everyday poses (standing, walking, reaching),
+# by DOF name without the side prefix. DOFs not listed: mean 0, spread 30.
+ANGLE_PRIOR_DEG = {
+    "lumbar_flex": (0, 10), "lumbar_bend": (0, 8), "lumbar_twist": (0, 10),
+    "thorax_flex": (0, 10), "thorax_bend": (0, 8), "thorax_twist": (0, 10),
+    "neck_flex": (0, 20), "neck_bend": (0, 10), "neck_twist": (0, 25),
+    "shoulder_flex": (0, 40), "shoulder_abd": (10, 25), "shoulder_rot": (0, 30),
+    "elbow_flex": (30, 40), "elbow_abd": (0, 5), "elbow_rot": (0, 30),
+    "hip_flex": (10, 30), "hip_abd": (0, 12), "hip_rot": (0, 12),
+    "knee_flex": (20, 35), "knee_abd": (0, 4), "knee_rot": (0, 10),
+    "ankle_flex": (0, 15), "ankle_inv": (0, 8),
+}
+# Spread of each length about the template's proportions, and of the overall body size about
+# the template's: weakly held in calibrated views (one view cannot tell size from distance),
+# fixed in scaled orthographic views (the camera scale absorbs it).
+DIMS_PRIOR_SIGMA = 0.08
+SIZE_PRIOR_SIGMA = {True: 0.12, False: 0.002}
+# In 3D inverse kinematics (starting points only) a prior spread costs this many metres.
+IK_PRIOR_M = 0.01
 
 # Pairs whose clicks may be exchanged by mistake (subject's left and right).
 LR_PAIRS = tuple((f"l_{j}", f"r_{j}") for j in
@@ -119,6 +134,9 @@ class _Kinematics:
         self.landmarks = np.stack([per_dim(j) for j in STANDARD_JOINTS])       # (17, 3, D)
         self.landmark_chain = body.chain[body.landmark_segment].astype(float)  # (17, n)
         self.default_dims = np.array([DEFAULT_DIMS[n] for n in LENGTH_DIMS])
+        prior = [ANGLE_PRIOR_DEG.get(_unsided(name), (0.0, 30.0)) for name in body.dof_names]
+        self.prior_mean = np.clip(np.radians([m for m, _ in prior]), self.lower, self.upper)
+        self.prior_sigma = np.radians([s for _, s in prior])
 
     def forward(self, angles, dims):
         """Joints in the body frame and their derivatives.
@@ -170,12 +188,12 @@ class _Kinematics:
         return Y, np.swapaxes(J, -1, -2), Y_dims
 
     def start_angles(self):
-        """Angles to start a fit from: rest, knees and elbows slightly bent (off their limit)."""
-        angles = np.zeros(self.n_dofs)
-        for k, name in enumerate(self.structure.dof_names):
-            if name.endswith(("knee_flex", "elbow_flex")):
-                angles[k] = 0.15
-        return np.clip(angles, self.lower, self.upper)
+        """Angles to start a fit from: the prior's mean (knees and elbows a little bent)."""
+        return self.prior_mean.copy()
+
+
+def _unsided(name):
+    return name[2:] if name.startswith(("l_", "r_")) else name
 
 
 _KINEMATICS = {}
@@ -268,7 +286,6 @@ class _Problem:
         self.cam_R = np.array([c.R for c in cams]).reshape(-1, 3, 3)
         self.cam_t = np.array([c.t[:2] for c in cams]).reshape(-1, 2)
         self.cam_c = np.array([c.c for c in cams]).reshape(-1, 2)
-        self.ppm = self._pixels_per_metre()
         self._cache_x = None
 
     # -- parameters ---------------------------------------------------------------------------
@@ -429,21 +446,21 @@ class _Problem:
         row = 2 * M
         if self.fit_dims:
             d0 = self.kin.default_dims
-            wd = DIMS_PRIOR_M * self.ppm
+            wd = CLICK_SIGMA_PX / DIMS_PRIOR_SIGMA
             res.append(wd * (dims / d0 - size))
             r = row + np.arange(self.D)
             block(r, np.arange(self.D), wd / d0)
             block(r, self.D, -wd)
             row += self.D
-            wk = SIZE_PRIOR_M[self.calibrated] * self.ppm
+            wk = CLICK_SIGMA_PX / SIZE_PRIOR_SIGMA[self.calibrated]
             res.append([wk * (size - 1.0)])
             block(row, self.D, wk)
             row += 1
         if self.free_angles:
             n = self.kin.n_dofs
-            wa = ANGLE_PRIOR_M * self.ppm
+            wa = np.tile(CLICK_SIGMA_PX / self.kin.prior_sigma, self.F)
             angles = self._split(x)[5]
-            res.append(wa * angles.ravel())
+            res.append(wa * (angles - self.kin.prior_mean).ravel())
             a0 = self.off_frame + (_ROOT_PARAMS if self.free_root else 0)
             cols_a = a0 + np.arange(self.F)[:, None] * self.frame_size + np.arange(n)
             block(row + np.arange(self.F * n), cols_a.ravel(), wa)
@@ -457,18 +474,6 @@ class _Problem:
             J = sparse.csr_matrix((vals, (rows, cols)), shape=(r.size, self.n_params))
         self._cache_x, self._cache = x.copy(), (r, J)
         return r, J
-
-    def _pixels_per_metre(self):
-        """Typical image scale of the body, from the start: ``|d uv / d X|`` per clicked joint."""
-        x = self.x0()
-        X, _, _ = self._joints(x)
-        _, A, _ = self._project(X, x[self.off_cam:].reshape(-1, _CAM_PARAMS))
-        fi, vi, ji = self._index.T
-        if len(fi) == 0:
-            return 1.0
-        norms = np.linalg.norm(A[fi, vi, ji], axis=(-2, -1)) / np.sqrt(2.0)
-        norms = norms[np.isfinite(norms)]
-        return float(np.median(norms)) if norms.size else 1.0
 
     def solve(self, max_nfev=200):
         """Run the robust fit; returns (state, cost) with cost in pixels squared."""
@@ -1080,16 +1085,17 @@ def _fit_3d(kin, target, dims, root, angles):
     seen = np.isfinite(target).all(axis=-1)
     R0 = root[:3, :3]
     n = kin.n_dofs
+    wa = IK_PRIOR_M / kin.prior_sigma
 
     def fun(x):
         R = se3.exp_so3(x[3:6]) @ R0
         Y, JA, _ = kin.forward(x[None, 6:], dims)
         X = Y[0] @ R.T + x[:3]
-        r = np.concatenate([(X - target)[seen].ravel(), ANGLE_PRIOR_M * x[6:]])
+        r = np.concatenate([(X - target)[seen].ravel(), wa * (x[6:] - kin.prior_mean)])
         J_rot = -se3.hat3(X - x[:3]) @ se3.left_jacobian_so3(x[3:6])
         J = np.concatenate([np.broadcast_to(np.eye(3), J_rot.shape), J_rot, R @ JA[0]],
                            axis=-1)[seen].reshape(-1, 6 + n)
-        J = np.vstack([J, np.hstack([np.zeros((n, 6)), ANGLE_PRIOR_M * np.eye(n)])])
+        J = np.vstack([J, np.hstack([np.zeros((n, 6)), np.diag(wa)])])
         return r, J
 
     lo = np.concatenate([np.full(6, -np.inf), kin.lower])

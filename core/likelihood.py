@@ -1,17 +1,17 @@
 """Image likelihood of Sidenbladh, Black & Fleet (2000) §3.2 and §5, for many particles at once.
 
-The appearance model is the previous image mapped onto the model (eq. 2): for every particle,
-points fixed on the limb surfaces are projected with the particle's pose at t-1 into I(t-1),
-which gives their grey values ``R_t``, and with its pose at t into I(t). Brightness constancy
-(eq. 3) says the two agree up to noise, modelled as a Gaussian whose variance grows as the
-surface turns away from the camera (eq. 4) mixed with uniform outliers (eq. 10). Points hidden
-by nearer limbs, or seen edge-on, carry the constant ``p_occluded`` instead (eq. 11); limbs and
-views multiply (eq. 12), i.e. log-likelihoods add.
+The appearance model is the previous image mapped onto the model at the previous estimate
+(eq. 2): the model is rendered at the estimate of frame t-1 and points on the visible limb
+surfaces keep their grey values from I(t-1), ``R_t = M(I_{t-1}, phi_{t-1})``. A particle moves
+those points rigidly with its limbs and projects them into I(t) (``M^-1(R_t, phi_t, x)``).
+Brightness constancy (eq. 3) says the two grey values agree up to noise, modelled as a Gaussian
+whose variance grows as the surface turns away from the camera (eq. 4) mixed with uniform
+outliers (eq. 10). Points hidden by nearer limbs, or seen edge-on, carry the constant
+``p_occluded`` instead (eq. 11); limbs and views multiply (eq. 12), i.e. log-likelihoods add.
 
-Which surface points: at the previous frame's estimate the model is rendered (z-buffer), and
-``n`` pixels are drawn uniformly, with replacement, from each limb's visible region (§5); their
-3D points and normals are stored in the limb's own coordinates, so every particle moves them
-rigidly with its limb. The paper projects a planar patch per limb instead (Fig. 2); projecting
+Which surface points: ``n`` pixels are drawn uniformly, with replacement, from each limb's
+visible region in the render (§5); their 3D points and normals are stored in the limb's own
+coordinates, so every particle moves them rigidly with its limb. The paper projects a planar patch per limb instead (Fig. 2); projecting
 points keeps the true surface angle of each point for eq. (4) at the same cost.
 
 Two refinements of the printed equations, both in the paper's spirit:
@@ -135,6 +135,8 @@ class SurfacePoints:
         Homogeneous points in their segment's reference coordinates.
     normals : array of float32, shape (3, M)
         Outward unit normals, same coordinates.
+    values : array of float32, shape (M,)
+        Grey values of the points in the reference image: the appearance ``R_t``.
     pairs : list of (int, array of int)
         ``(o, columns)``: the points ``columns`` are tested against occluder ``o``.
     """
@@ -143,6 +145,7 @@ class SurfacePoints:
     slices: tuple
     points: np.ndarray
     normals: np.ndarray
+    values: np.ndarray
     pairs: list
 
     @property
@@ -183,9 +186,10 @@ class ImageLikelihood:
     epsilon : float
         Outlier share ``epsilon`` of eq. (10); outliers are uniform over 256 grey levels.
     p_occluded : float, optional
-        Constant likelihood of a hidden point (eq. 11). Default: the Gaussian-plus-outlier
-        density one ``sigma_image`` away from the mean, so hiding a limb is neither cheaper
-        than a fair match nor dearer than a poor one.
+        Constant likelihood of a hidden point (eq. 11). Default 1/256: a hidden point's grey
+        value is explained by something else, any value alike. That is far below a good match
+        (a pose does not gain by hiding its limbs) and above an outlier (a limb that truly
+        disappears behind another is not punished as a mismatch).
     n_points : int
         Pixels drawn per limb and view (with replacement, §5).
     beta : float
@@ -220,10 +224,7 @@ class ImageLikelihood:
         self.occluders = Occluders.from_primitives(self.prims)
         self.sigma_image = float(sigma_image)
         self.epsilon = float(epsilon)
-        if p_occluded is None:
-            p_occluded = self.epsilon / 256.0 + (1.0 - self.epsilon) * np.exp(-0.5) / (
-                np.sqrt(2.0 * np.pi) * self.sigma_image)
-        self.p_occluded = float(p_occluded)
+        self.p_occluded = 1.0 / 256.0 if p_occluded is None else float(p_occluded)
         self.n_points = int(n_points)
         self.beta = float(beta)
         self.min_pixels = int(min_pixels)
@@ -233,23 +234,38 @@ class ImageLikelihood:
 
     # -- where to look ----------------------------------------------------------------------
 
-    def set_reference(self, seg2world):
-        """Draw the surface points at a reference pose (the previous frame's estimate).
+    def set_reference(self, seg2world, images):
+        """Map the previous images onto the model at the previous estimate (eq. 2).
 
         Parameters
         ----------
         seg2world : array, shape (S, 4, 4)
+            The estimate of frame t-1.
+        images : list of array, shape (H, W) float32
+            I(t-1) per view, from :func:`prepare_image`.
         """
-        self.surfaces = [self._surface_points(cam, np.asarray(seg2world, float))
-                         for cam in self.cameras]
+        if len(images) != len(self.cameras):
+            raise ZoopraxisError(f"ImageLikelihood: {len(self.cameras)} views but "
+                                 f"{len(images)} images")
+        seg2world = np.asarray(seg2world, float)
+        self.surfaces = [self._surface_points(cam, seg2world, self._check_image(cam, image))
+                         for cam, image in zip(self.cameras, images)]
 
-    def _surface_points(self, cam, seg2world):
+    @staticmethod
+    def _check_image(cam, image):
+        if image.shape != (cam.height, cam.width):
+            raise ZoopraxisError(f"view '{cam.name}': image is {image.shape[1]}x"
+                                 f"{image.shape[0]}, the camera expects {cam.width}x{cam.height}")
+        return image
+
+    def _surface_points(self, cam, seg2world, image):
         res = render.render(cam, seg2world, self.prims, want=("point", "normal"))
         labels = res.label.ravel()
         points = res.point.reshape(-1, 3)
         normals = res.normal.reshape(-1, 3)
+        grey = image.ravel()
         world2seg = np.linalg.inv(seg2world)
-        segments, chunks_p, chunks_n = [], [], []
+        segments, chunks_p, chunks_n, chunks_v = [], [], [], []
         for k in range(self.body.n_segments):
             pixels = np.flatnonzero(labels == k)
             if pixels.size < self.min_pixels:
@@ -259,15 +275,17 @@ class ImageLikelihood:
             segments.append(k)
             chunks_p.append(points[pick] @ R.T + t)
             chunks_n.append(normals[pick] @ R.T)
+            chunks_v.append(grey[pick])
         if not segments:
             return SurfacePoints((), (), np.zeros((4, 0), np.float32),
-                                 np.zeros((3, 0), np.float32), [])
+                                 np.zeros((3, 0), np.float32), np.zeros(0, np.float32), [])
         P = np.concatenate(chunks_p)
         surf = SurfacePoints(
             tuple(segments),
             tuple(slice(i * self.n_points, (i + 1) * self.n_points) for i in range(len(segments))),
             np.vstack([P.T, np.ones(len(P))]).astype(np.float32),
-            np.concatenate(chunks_n).T.astype(np.float32), [])
+            np.concatenate(chunks_n).T.astype(np.float32),
+            np.concatenate(chunks_v).astype(np.float32), [])
         surf.pairs = self._pairs(cam, seg2world, surf)
         # Points the capsule test calls hidden although the z-buffer saw them lie where the
         # capsules are a poor fit; drop them so the test agrees with the render at the reference.
@@ -293,7 +311,7 @@ class ImageLikelihood:
             if cols.size:
                 pairs.append((o, cols))
         return SurfacePoints(tuple(segments), tuple(slices), surf.points[:, keep],
-                             surf.normals[:, keep], pairs)
+                             surf.normals[:, keep], surf.values[keep], pairs)
 
     def _pairs(self, cam, seg2world, surf):
         """(limb, occluder) pairs whose occlusion can change near the reference.
@@ -426,15 +444,20 @@ class ImageLikelihood:
 
     # -- the likelihood ---------------------------------------------------------------------
 
-    def evaluate(self, images_prev, images_now, seg2world_prev, seg2world_now):
-        """Log-likelihood of every particle (eqs. 2-4, 10-12).
+    def evaluate(self, images, seg2world, previous=None):
+        """Log-likelihood of every particle (eqs. 3, 4, 10-12).
 
         Parameters
         ----------
-        images_prev, images_now : list of array, shape (H, W) float32
-            I(t-1) and I(t) per view, from :func:`prepare_image`.
-        seg2world_prev, seg2world_now : array, shape (N, S, 4, 4)
-            Every particle's segments at t-1 (where its appearance is read) and at t.
+        images : list of array, shape (H, W) float32
+            I(t) per view, from :func:`prepare_image`.
+        seg2world : array, shape (N, S, 4, 4)
+            Every particle's segments at t.
+        previous : (list of array, array of shape (N, S, 4, 4)), optional
+            I(t-1) per view and every particle's segments at t-1. Given, each particle reads
+            its appearance from I(t-1) at its own previous pose, as the paper's filter does
+            (§4.1: "for each state sample from time t-1, we compute R_t"); by default all
+            particles share the appearance mapped at the reference (:meth:`set_reference`).
 
         Returns
         -------
@@ -442,53 +465,58 @@ class ImageLikelihood:
         """
         if self.surfaces is None:
             raise ZoopraxisError("ImageLikelihood: call set_reference before evaluate")
-        seg2world_prev = np.asarray(seg2world_prev)
-        seg2world_now = np.asarray(seg2world_now)
-        N = seg2world_now.shape[0]
-        if seg2world_prev.shape != seg2world_now.shape:
-            raise ZoopraxisError(f"ImageLikelihood: {seg2world_prev.shape} particles at t-1 "
-                                 f"but {seg2world_now.shape} at t")
-        if len(images_prev) != len(self.cameras) or len(images_now) != len(self.cameras):
+        if len(images) != len(self.cameras):
             raise ZoopraxisError(f"ImageLikelihood: {len(self.cameras)} views but "
-                                 f"{len(images_prev)} and {len(images_now)} images")
+                                 f"{len(images)} images")
+        seg2world = np.asarray(seg2world)
+        N = seg2world.shape[0]
+        if previous is not None:
+            images_prev, seg2world_prev = previous
+            if np.shape(seg2world_prev) != seg2world.shape:
+                raise ZoopraxisError(f"ImageLikelihood: {np.shape(seg2world_prev)} previous "
+                                     f"poses for {seg2world.shape} particles")
         ll = np.zeros(N)
         good = np.zeros(N)
         weight = np.zeros(N)
         total = 0
-        for v, (cam, surf) in enumerate(zip(self.cameras, self.surfaces)):
+        for v, (cam, surf, image) in enumerate(zip(self.cameras, self.surfaces, images)):
             if surf.n_points == 0:
                 continue
-            for key, image in (("prev", images_prev[v]), ("now", images_now[v])):
-                if image.shape != (cam.height, cam.width):
-                    raise ZoopraxisError(f"view '{cam.name}': {key} image is "
-                                         f"{image.shape[1]}x{image.shape[0]}, the camera "
-                                         f"expects {cam.width}x{cam.height}")
+            self._check_image(cam, image)
             total += surf.n_points
             for start in range(0, N, _CHUNK):
                 part = slice(start, min(start + _CHUNK, N))
-                a, b, c = self._view(cam, surf, images_prev[v], images_now[v],
-                                     seg2world_prev[part], seg2world_now[part])
+                prev = None if previous is None else \
+                    (self._check_image(cam, images_prev[v]), seg2world_prev[part])
+                a, b, c = self._view(cam, surf, image, seg2world[part], prev)
                 ll[part] += a
                 good[part] += b
                 weight[part] += c
         inliers = good / np.maximum(weight, 1e-12)
         return LikelihoodResult(self.beta * ll, inliers, weight / max(total, 1))
 
-    def _view(self, cam, surf, image_prev, image_now, seg2world_prev, seg2world_now):
-        H, W = image_now.shape
-        prev = self._project(cam, seg2world_prev, surf, normals=False)
-        now = self._project(cam, seg2world_now, surf, normals=True)
-        N, M = now["z"].shape
-        values = []
-        inside = np.ones((N, M), bool)
-        for image, g in ((image_prev, prev), (image_now, now)):
-            u, v = g["u"], g["v"]
-            inside &= (g["z"] > 1e-3) & (u >= 0) & (u <= W - 1) & (v >= 0) & (v <= H - 1)
-            mx = np.nan_to_num(u, nan=-1.0, posinf=-1.0, neginf=-1.0)
-            my = np.nan_to_num(v, nan=-1.0, posinf=-1.0, neginf=-1.0)
-            values.append(cv2.remap(image, mx, my, cv2.INTER_LINEAR,
-                                    borderMode=cv2.BORDER_CONSTANT, borderValue=0.0))
-        diff = values[1] - values[0]
+    @staticmethod
+    def _sample(image, geometry):
+        """Bilinear grey values at the projected points, and which points fell in the image."""
+        H, W = image.shape
+        u, v = geometry["u"], geometry["v"]
+        inside = (geometry["z"] > 1e-3) & (u >= 0) & (u <= W - 1) & (v >= 0) & (v <= H - 1)
+        mx = np.nan_to_num(u, nan=-1.0, posinf=-1.0, neginf=-1.0)
+        my = np.nan_to_num(v, nan=-1.0, posinf=-1.0, neginf=-1.0)
+        values = cv2.remap(image, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+                           borderValue=0.0)
+        return values, inside
+
+    def _view(self, cam, surf, image, seg2world, previous=None):
+        now = self._project(cam, seg2world, surf, normals=True)
+        predicted, inside = self._sample(image, now)
+        if previous is None:
+            appearance = surf.values
+        else:
+            appearance, inside_prev = self._sample(
+                previous[0], self._project(cam, previous[1], surf, normals=False))
+            inside &= inside_prev
+        diff = predicted - appearance
         cos = np.clip(now["cos"], 0.0, 1.0)
         hidden = self._occluded(cam, surf, now)
         q = np.where(inside & ~hidden, cos, np.float32(0.0))

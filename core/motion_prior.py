@@ -251,12 +251,12 @@ def smooth_sigmas(body, fps=_REFERENCE_FPS):
         In the order of :func:`param_names`; metres and radians per frame.
     """
     s = _REFERENCE_FPS / float(fps)
-    pos = [0.01] * 3 + [0.02] * 3
-    vel = [0.004] * 3 + [0.01] * 3
+    pos = [0.005] * 3 + [0.01] * 3
+    vel = [0.003] * 3 + [0.005] * 3
     for name in body.dof_names:
         heavy = any(k in name for k in ("hip", "lumbar", "thorax", "neck"))
-        pos.append(0.03 if heavy else 0.05)
-        vel.append(0.01 if heavy else 0.02)
+        pos.append(0.01 if heavy else 0.02)
+        vel.append(0.005 if heavy else 0.01)
     return np.array(pos) * s, np.array(vel) * s
 
 

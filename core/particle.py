@@ -6,7 +6,8 @@ The posterior over pose (and velocity, or walking phase) is a set of weighted sa
 1. draw N samples from the previous posterior (systematic resampling of the weights);
 2. move each by the temporal prior ``p(phi_t | phi_{t-1}, V_{t-1})`` (:mod:`motion_prior`);
 3. weight each by the image likelihood ``p(I_t | phi_t, R_t)`` (:mod:`likelihood`), whose
-   appearance ``R_t`` is I(t-1) seen from that sample's own pose at t-1 (eq. 2);
+   appearance ``R_t`` is I(t-1) mapped onto the model at the previous estimate, or at each
+   sample's own previous pose (eq. 2; ``appearance``);
 4. report the expected pose (the weighted mean, §7) and the posterior's spread.
 
 One call of :meth:`ParticleFilter.step` is one frame, so a caller (the command line, or the
@@ -34,6 +35,7 @@ from .likelihood import ImageLikelihood, prepare_image
 from .motion_prior import param_names
 
 STATUSES = ("ok", "uncertain", "lost")
+APPEARANCES = ("estimate", "particle")
 
 
 class BatchKinematics:
@@ -267,6 +269,12 @@ class ParticleFilter:
         give the same track.
     likelihood : ImageLikelihood, optional
         Default: ``ImageLikelihood(body, cameras, seed=seed, **likelihood_options)``.
+    appearance : {"estimate", "particle"}
+        Where I(t-1) is mapped onto the model (eq. 2): at the previous expected pose, shared
+        by all particles (drift-resistant: a particle that slides off a limb onto a static
+        background mismatches), or at each particle's own previous pose, as in the paper's
+        §4.1 (each hypothesis judged by its own motion only, so a direction the image does
+        not see, such as the twist of a straight arm, stays uncertain).
     min_ess : float
         Effective sample size, as a share of ``n_particles``, below which a frame's
         likelihood is tempered (:func:`tempered_weights`); 0 for the plain filter.
@@ -277,8 +285,8 @@ class ParticleFilter:
     """
 
     def __init__(self, body, cameras, prior, *, n_particles=1000, seed=0, likelihood=None,
-                 min_ess=0.05, lost_inliers=0.3, uncertain_spread=0.08,
-                 **likelihood_options):
+                 appearance="estimate", min_ess=0.05, lost_inliers=0.3,
+                 uncertain_spread=0.08, **likelihood_options):
         if int(n_particles) != n_particles or n_particles < 1:
             raise ZoopraxisError(f"ParticleFilter: n_particles must be a positive whole number, "
                                  f"got {n_particles!r}")
@@ -292,6 +300,10 @@ class ParticleFilter:
         self.likelihood = likelihood if likelihood is not None else ImageLikelihood(
             body, cameras, seed=seed + 1, **likelihood_options)
         self.kinematics = BatchKinematics(body)
+        if appearance not in APPEARANCES:
+            raise ZoopraxisError(f"ParticleFilter: appearance must be one of "
+                                 f"{', '.join(APPEARANCES)}, got {appearance!r}")
+        self.appearance = appearance
         self.min_ess = float(min_ess)
         self.temper = 1.0
         self.lost_inliers = float(lost_inliers)
@@ -329,7 +341,8 @@ class ParticleFilter:
         Returns
         -------
         FilterStep
-            The given pose as the expectation, with the initial particles' spread.
+            The initial particles' expectation (the given pose, up to sampling, where no
+            parameter is drawn uniformly) and spread.
         """
         self._images = self._prepare(images)
         self.state = self.prior.init_state(pose, self.n_particles, self.rng, **init_options)
@@ -338,8 +351,9 @@ class ParticleFilter:
         self.weights = np.full(self.n_particles, 1.0 / self.n_particles)
         self._frame = 0
         self.temper = 1.0
-        _, spread = posterior_mean(roots, angles, self.weights)
-        self.pose = Pose(pose.root.copy(), np.asarray(pose.angles, float).copy())
+        # The expectation of the initial particles, not the given pose: with a parameter drawn
+        # uniformly (the arm example's twist), the given value is not known.
+        self.pose, spread = posterior_mean(roots, angles, self.weights)
         return self._report(roots, angles, np.zeros(self.n_particles), 1.0, spread)
 
     def step(self, images):
@@ -358,15 +372,17 @@ class ParticleFilter:
             raise ZoopraxisError("ParticleFilter: call start() with the first frame first")
         images_now = self._prepare(images)
         index = systematic_resample(self.weights, self.rng)
-        state = {k: v[index] for k, v in self.state.items()}
-        seg2world_prev = self._seg2world[index]
-        state = self.prior.propagate(state, self.rng)
+        state = self.prior.propagate({k: v[index] for k, v in self.state.items()}, self.rng)
         roots, angles = self.prior.poses(state)
         seg2world = self.kinematics.seg2world(roots, angles)
-        # Where to compare: surface points visible at the previous estimate.
+        # The appearance: I(t-1) mapped onto the model at the previous estimate (eq. 2), or
+        # at every particle's own previous pose.
         self.likelihood.set_reference(
-            self.kinematics.seg2world(self.pose.root[None], self.pose.angles[None])[0])
-        result = self.likelihood.evaluate(self._images, images_now, seg2world_prev, seg2world)
+            self.kinematics.seg2world(self.pose.root[None], self.pose.angles[None])[0],
+            self._images)
+        previous = (self._images, self._seg2world[index]) \
+            if self.appearance == "particle" else None
+        result = self.likelihood.evaluate(images_now, seg2world, previous)
         ll = result.log_likelihood
         w, self.temper = tempered_weights(ll, self.min_ess)
         self.state, self._seg2world, self.weights = state, seg2world, w

@@ -1,0 +1,185 @@
+"""Adapter between the scene and the core workers: initialization, tracking, board calibration.
+
+The workers are imported lazily, when a job runs, so the add-on registers (and the rest of it
+works) in a build that lacks one of them; the user then gets a one-line error naming it. Every
+worker is called with the keyword arguments its signature accepts, so the scene side does not
+break when a worker grows or drops an option.
+
+Everything here reads the scene on the main thread (:func:`gather`) and hands plain core objects
+to the workers, which may then run on another thread: no bpy there.
+"""
+
+import importlib
+import inspect
+from dataclasses import dataclass, field
+
+from ..core.errors import ZoopraxisError
+
+# The last initialization per scene, kept for the tracker (InitResult is not scene data).
+_initial = {}
+
+
+def _import(module, what):
+    try:
+        return importlib.import_module(f"..core.{module}", __package__)
+    except ModuleNotFoundError as ex:
+        if ex.name and ex.name.endswith(f"core.{module}"):
+            raise ZoopraxisError(f"{what} is not available in this build (core/{module}.py "
+                                 "is missing)") from None
+        raise
+
+
+def call(function, *args, **options):
+    """Call ``function`` with the options its signature accepts (all of them with ``**kw``)."""
+    parameters = inspect.signature(function).parameters
+    if not any(p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters.values()):
+        options = {k: v for k, v in options.items() if k in parameters}
+    return function(*args, **options)
+
+
+@dataclass
+class Take:
+    """Everything a job needs from the scene, as core objects.
+
+    Attributes
+    ----------
+    plates : dict of str to core.plates.Plate
+    paths : dict of str to str
+    offsets : dict of str to int
+    anchors : list of core.markers.Anchor
+    cameras : dict of str to PinholeCamera, or None when uncalibrated
+    frames : range
+    template : str
+    tracker : str
+    """
+
+    plates: dict
+    paths: dict
+    offsets: dict
+    anchors: list
+    cameras: dict
+    frames: range
+    template: str
+    tracker: str
+    num_frames: int
+    fps: float = 30.0
+    extra: dict = field(default_factory=dict)
+
+    def close(self):
+        for plate in self.plates.values():
+            plate.close()
+
+
+def gather(context, *, need_markers=True):
+    """Read the take off the scene and check it, before any job starts.
+
+    Raises
+    ------
+    ZoopraxisError
+        No plates, an unreadable plate, views of different lengths, no or too few markers (a
+        joint marked in no view), a calibrated view without a camera, a bad frame range.
+    """
+    from ..core.markers import check_markers
+    from ..core.plates import check_same_length, open_plate
+    from . import markers
+    from .calibration import cameras_from_scene
+
+    scene = context.scene
+    settings = scene.zoopraxis
+    views = [v for v in settings.views]
+    if not views:
+        raise ZoopraxisError("no plates loaded: load one plate per camera first")
+    paths = {v.name: v.path for v in views}
+    offsets = {v.name: v.offset for v in views}
+    cameras = cameras_from_scene(context, required=False) or None
+    plates = {}
+    try:
+        for v in views:
+            plates[v.name] = open_plate(v.path, name=v.name)
+        n = check_same_length(plates, offsets)
+        anchors = markers.read_anchors(settings)
+        if need_markers:
+            check_markers(anchors, list(plates), n, path="joint markers")
+        if settings.use_frame_range:
+            start, stop = settings.frame_range_start, settings.frame_range_end
+            if not 0 <= start < stop <= n:
+                raise ZoopraxisError(f"frame range {start}:{stop} is outside the take (0:{n})")
+            frames = range(start, stop)
+        else:
+            frames = range(0, n)
+    except BaseException:
+        for plate in plates.values():
+            plate.close()
+        raise
+    fps = scene.render.fps / scene.render.fps_base
+    return Take(plates, paths, offsets, anchors, cameras, frames, settings.template.lower(),
+                settings.tracker.lower(), n, fps)
+
+
+def initialize(take, *, progress=None, cancel=None):
+    """Fit the body to the markers (:func:`core.initialize.initialize`)."""
+    module = _import("initialize", "initialization")
+    if progress:
+        progress(0, 1)
+    inside = [a for a in take.anchors if a.frame in take.frames] or take.anchors
+    cameras = take.cameras if take.cameras is not None else \
+        {v: p.image_size for v, p in take.plates.items()}
+    result = call(module.initialize, inside, cameras, template=take.template,
+                  calibrated=take.cameras is not None, views=list(take.plates))
+    if progress:
+        progress(1, 1)
+    return result
+
+
+def _fingerprint(take):
+    """What an initialization depends on: template, calibration and the anchors' clicks."""
+    clicks = tuple((a.frame, v, j, round(u, 2), round(w, 2))
+                   for a in take.anchors if a.frame in take.frames
+                   for v, joints in sorted(a.views.items())
+                   for j, (u, w) in sorted(joints.items()))
+    cameras = None if take.cameras is None else tuple(
+        (v, tuple(round(x, 6) for x in c.P.ravel())) for v, c in sorted(take.cameras.items()))
+    return take.template, cameras, clicks
+
+
+def remember_initial(scene, init, take):
+    _initial[scene.name] = (_fingerprint(take), init)
+
+
+def initial_for(scene, take):
+    """The remembered initialization if it was made from this take's markers and cameras."""
+    fingerprint, init = _initial.get(scene.name, (None, None))
+    return init if init is not None and fingerprint == _fingerprint(take) else None
+
+
+def forget(scene=None):
+    if scene is None:
+        _initial.clear()
+    else:
+        _initial.pop(scene.name, None)
+
+
+def track(take, *, init=None, progress=None, cancel=None, log=None):
+    """Track the take (:func:`core.track.track`, or the particle/hybrid trackers)."""
+    options = dict(frames=take.frames, offsets=take.offsets, template=take.template, init=init,
+                   progress=progress, cancel=cancel, log=log)
+    if take.tracker == "differential":
+        module = _import("track", "the differential tracker")
+        return call(module.track, take.plates, take.anchors, take.cameras, **options)
+    module = _import("hybrid", f"the {take.tracker} tracker")
+    return call(module.track, take.plates, take.anchors, take.cameras, tracker=take.tracker,
+                **options)
+
+
+def calibrate(take, *, progress=None, cancel=None, log=None, **board):
+    """Calibrate the cameras from a board seen in the plates (:mod:`core.calibrate`).
+
+    Returns
+    -------
+    cameras : dict of str to PinholeCamera
+    """
+    module = _import("calibrate", "board calibration")
+    function = getattr(module, "calibrate", None) or getattr(module, "calibrate_plates")
+    result = call(function, take.plates, offsets=take.offsets, progress=progress, cancel=cancel,
+                  log=log, **board)
+    return getattr(result, "cameras", result)

@@ -1,0 +1,117 @@
+"""The take's settings, stored on the scene as ``scene.zoopraxis``.
+
+Views (one plate each: clip, camera object, frame offset), the joint list the marker panel
+shows, tracker settings, the bone map for retargeting, and the state of a running job.
+"""
+
+import bpy
+from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProperty,
+                       IntProperty, PointerProperty, StringProperty)
+
+from ..core.body import TEMPLATES
+from .preferences import TRACKERS
+from .retarget import PRESETS
+
+
+def _sync_clip_start(settings):
+    """Place every view's clip so take frame 0 shows at ``first_frame`` (plate frame = take
+    frame + offset; clip frame 1 is plate frame 0)."""
+    for view in settings.views:
+        if view.clip is not None:
+            view.clip.frame_start = settings.first_frame - view.offset
+
+
+def _view_changed(self, context):
+    _sync_clip_start(context.scene.zoopraxis)
+
+
+def _is_camera(self, obj):
+    return obj.type == 'CAMERA'
+
+
+def _is_armature(self, obj):
+    return obj.type == 'ARMATURE'
+
+
+class ZOOPRAXIS_PG_view(bpy.types.PropertyGroup):
+    name: StringProperty(name="View", description="View name, as in markers.json and "
+                                                  "calibration.json")
+    path: StringProperty(name="Plate", description="Video file or image folder",
+                         subtype='FILE_PATH')
+    clip: PointerProperty(name="Clip", type=bpy.types.MovieClip)
+    camera: PointerProperty(name="Camera", type=bpy.types.Object, poll=_is_camera,
+                            description="Calibrated camera of this view")
+    offset: IntProperty(name="Offset", description="Plate frame shown at take frame 0",
+                        update=_view_changed)
+    num_frames: IntProperty(name="Frames")
+
+
+class ZOOPRAXIS_PG_joint(bpy.types.PropertyGroup):
+    name: StringProperty(name="Joint")
+
+
+class ZOOPRAXIS_PG_bone_pair(bpy.types.PropertyGroup):
+    name: StringProperty(name="Segment", description="Body segment")
+    bone: StringProperty(name="Bone", description="Bone of the target rig")
+
+
+class ZOOPRAXIS_PG_settings(bpy.types.PropertyGroup):
+    views: CollectionProperty(type=ZOOPRAXIS_PG_view)
+    active_view: IntProperty()
+    joints: CollectionProperty(type=ZOOPRAXIS_PG_joint)
+    active_joint: IntProperty()
+    first_frame: IntProperty(name="First Frame", default=1, update=_view_changed,
+                             description="Scene frame of take frame 0")
+
+    calibration_path: StringProperty(name="Calibration", subtype='FILE_PATH')
+    markers_path: StringProperty(name="Markers", subtype='FILE_PATH')
+    result_path: StringProperty(name="Result", subtype='FILE_PATH',
+                                description="result.json of the last track, or one to bake")
+
+    template: EnumProperty(name="Body", items=[(t.upper(), t.title(), f"Body template '{t}'")
+                                               for t in TEMPLATES], default='FULL')
+    tracker: EnumProperty(name="Tracker", items=TRACKERS, default='DIFFERENTIAL')
+    use_frame_range: BoolProperty(name="Frame Range", description="Track part of the take")
+    frame_range_start: IntProperty(name="Start", min=0, description="First take frame")
+    frame_range_end: IntProperty(name="End", min=1, default=1,
+                                 description="Take frame after the last")
+
+    running: BoolProperty(name="Running")
+    status: StringProperty(name="Status")
+    progress: FloatProperty(name="Progress", min=0.0, max=1.0, subtype='FACTOR')
+    initialized: BoolProperty(name="Initialized")
+
+    armature: PointerProperty(name="Armature", type=bpy.types.Object, poll=_is_armature,
+                              description="Armature of the last bake")
+    rig: PointerProperty(name="Target Rig", type=bpy.types.Object, poll=_is_armature,
+                         description="Existing rig to retarget onto (empty: build an armature)")
+    preset: EnumProperty(name="Naming", items=PRESETS, default='MIXAMO')
+    bone_map: CollectionProperty(type=ZOOPRAXIS_PG_bone_pair)
+    active_bone_pair: IntProperty()
+    body_mesh: BoolProperty(name="Body Mesh", default=True,
+                            description="Bind the volumetric body to the baked armature")
+
+    def view(self, name):
+        return next((v for v in self.views if v.name == name), None)
+
+
+classes = (ZOOPRAXIS_PG_view, ZOOPRAXIS_PG_joint, ZOOPRAXIS_PG_bone_pair, ZOOPRAXIS_PG_settings)
+
+
+@bpy.app.handlers.persistent
+def _forget_initial(*args):
+    # An initialization belongs to the session's scene, not to a newly loaded file.
+    from . import pipeline
+
+    pipeline.forget()
+
+
+def register():
+    bpy.types.Scene.zoopraxis = PointerProperty(type=ZOOPRAXIS_PG_settings)
+    bpy.app.handlers.load_post.append(_forget_initial)
+
+
+def unregister():
+    if _forget_initial in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.remove(_forget_initial)
+    del bpy.types.Scene.zoopraxis

@@ -1,0 +1,143 @@
+"""Tracking a take: anchors, passes, blending, status, cancel, and bad input."""
+
+import numpy as np
+import pytest
+
+from zoopraxis.core import fit3d, se3, synth
+from zoopraxis.core import track as T
+from zoopraxis.core.body import Pose
+from zoopraxis.core.camera import ScaledOrthoCamera
+from zoopraxis.core.errors import ZoopraxisError
+from zoopraxis.core.joints import STANDARD_JOINTS
+from zoopraxis.core.markers import Anchor
+
+N = 8
+
+
+@pytest.fixture(scope="module")
+def take():
+    from tests.conftest import shared_data_dir
+
+    data = shared_data_dir()
+    if data is None:
+        pytest.skip("shared data (../shared/data) is not beside this clone")
+    # a slow walk: frame-to-frame joint motion of about 2 cm
+    scene, joints = synth.take_from_bvh(data / "cmu_mocap" / "131_02.bvh",
+                                        frames=slice(200, 200 + N), views=2,
+                                        image_size=(320, 240), noise=1.0, clutter=4)
+    body, poses, _ = fit3d.fit_sequence(joints)
+    return scene, joints, body, poses
+
+
+def anchors_at(scene, joints, frames):
+    out = []
+    for f in frames:
+        out.append(Anchor(f, {c.name: dict(zip(STANDARD_JOINTS, map(tuple, c.project(joints[f]))))
+                              for c in scene.cameras}))
+    return out
+
+
+def run(take, anchor_frames=(0,), **kw):
+    scene, joints, body, poses = take
+    cams = {c.name: c for c in scene.cameras}
+    init = T.Initial(body, {f: poses[f] for f in anchor_frames}, cams)
+    return T.track(synth.scene_plates(scene), anchors_at(scene, joints, anchor_frames), cams,
+                   init=init, **kw)
+
+
+def test_tracks_a_short_walk(take):
+    scene, joints, body, poses = take
+    calls = []
+    res = run(take, progress=lambda d, t: calls.append((d, t)))
+    assert list(res.frames) == list(range(N)) and res.mode == "calibrated"
+    error = np.linalg.norm(res.joints3d - joints, axis=2).mean()
+    assert error < 0.03
+    for c in scene.cameras:
+        px = np.linalg.norm(res.joints2d[c.name] - c.project(joints), axis=2).mean()
+        assert px < 4.0
+        assert res.residual[c.name].shape == (N,) and np.all(res.residual[c.name][1:] > 0)
+    assert res.status[0] == "ok" and set(res.status) <= {"ok", "uncertain", "lost"}
+    assert calls[-1] == (N - 1, N - 1)
+    assert res.angles.shape == (N, body.n_dofs) and res.roots.shape == (N, 4, 4)
+
+
+def test_later_anchor_pulls_the_end_back(take):
+    scene, joints, body, poses = take
+    res = run(take, anchor_frames=(0, N - 1))
+    # anchor frames hold exactly the anchors' poses
+    assert np.allclose(res.joints3d[N - 1], body.joints(poses[N - 1]), atol=1e-9)
+    error = np.linalg.norm(res.joints3d - joints, axis=2).mean(axis=1)
+    assert error.max() < 0.06
+
+
+def test_tracks_backward_before_the_first_anchor(take):
+    scene, joints, body, poses = take
+    res = run(take, anchor_frames=(3,), frames=range(0, 6))
+    assert list(res.frames) == list(range(6))
+    assert np.linalg.norm(res.joints3d - joints[:6], axis=2).mean() < 0.05
+
+
+def test_cancel_keeps_the_frames_done(take):
+    done = []
+
+    def progress(d, t):
+        done.append(d)
+
+    res = run(take, progress=progress, cancel=lambda: len(done) >= 3)
+    assert list(res.frames) == [0, 1, 2, 3]
+    assert res.extra["cancelled"] is True
+
+
+def test_uncalibrated_single_view(take):
+    scene, joints, body, poses = take
+    cam = scene.cameras[0]
+    pose = poses[0]
+    # The scaled-orthographic camera that best matches the perspective one near the body.
+    depth = cam.depth(joints[0]).mean()
+    body2world = pose.root
+    R = cam.R @ body2world[:3, :3]
+    t = cam.R @ body2world[:3, 3] + cam.t
+    ortho = ScaledOrthoCamera(cam.name, cam.image_size, s=cam.K[0, 0] / depth, R=R, t=t,
+                              c=cam.K[:2, 2])
+    init = T.Initial(body, {0: Pose(np.eye(4), pose.angles.copy())}, {cam.name: ortho})
+    plates = {cam.name: synth.ScenePlate(scene, 0)}
+    anchor = anchors_at(scene, joints, [0])[0]
+    anchor.views = {cam.name: anchor.views[cam.name]}
+    res = T.track(plates, [anchor], None, init=init)
+    assert res.mode == "uncalibrated"
+    px = np.linalg.norm(res.joints2d[cam.name] - cam.project(joints), axis=2).mean(axis=1)
+    assert px.max() < 8.0
+    # body-centred frame: the pelvis starts at the origin
+    assert np.allclose(res.joints3d[0][0], 0.0, atol=1e-9)
+
+
+def test_bad_input(take):
+    scene, joints, body, poses = take
+    cams = {c.name: c for c in scene.cameras}
+    plates = synth.scene_plates(scene)
+    anchors = anchors_at(scene, joints, [0])
+    init = T.Initial(body, {0: poses[0]}, cams)
+    with pytest.raises(ZoopraxisError, match="no camera for view 'cam1'"):
+        T.track(plates, anchors, {"cam0": cams["cam0"]}, init=init)
+    with pytest.raises(ZoopraxisError, match="outside the take"):
+        T.track(plates, anchors, cams, init=init, frames=range(0, N + 5))
+    with pytest.raises(ZoopraxisError, match="no marker anchor inside frames 4:8"):
+        T.track(plates, anchors, cams, init=init, frames=range(4, N))
+    small = cams["cam1"].scaled(0.5)
+    with pytest.raises(ZoopraxisError, match="view 'cam1': calibration image size"):
+        T.track(plates, anchors, {"cam0": cams["cam0"], "cam1": small}, init=init)
+    missing = anchors_at(scene, joints, [0])
+    for view in missing[0].views.values():
+        view.pop("l_wrist")
+    with pytest.raises(ZoopraxisError, match="joint 'l_wrist' is marked in no view"):
+        T.track(plates, missing, cams, init=init)
+
+
+def test_blend_states_interpolates():
+    cams = [ScaledOrthoCamera("a", (10, 10), s=10.0)]
+    a = T.State(np.eye(4)[None], np.zeros(3), cams)
+    b = T.State(se3.exp_se3([0.2, 0, 0, 0, 0, 0.4])[None], np.ones(3), [cams[0].replace(s=40.0)])
+    m = T._blend_states(a, b, 0.5)
+    assert np.allclose(m.angles, 0.5)
+    assert np.allclose(se3.log_se3(m.roots[0]), [0.1, 0, 0, 0, 0, 0.2])
+    assert np.isclose(m.cameras[0].s, 20.0)
