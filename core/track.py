@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 
 from . import se3
-from .background import estimate_background, model_coverage
+from .background import estimate_background, model_coverage, silhouette_iou
 from .body import Pose
 from .camera import ScaledOrthoCamera
 from .differential import DifferentialTracker, Settings, State, prepare_images
@@ -25,9 +25,12 @@ from .markers import check_markers
 from .plates import to_gray_float
 from .result import TrackResult
 
-# Status thresholds (silhouette overlap of model and foreground; grey residual 0-255).
-IOU_LOST, IOU_UNCERTAIN = 0.3, 0.5
-RESIDUAL_UNCERTAIN = 2.5   # times the take's median residual
+# Status thresholds. The silhouette overlap of model and foreground is compared with the
+# overlap at the anchor frame of the same view (masks are imperfect: dark clothes on a dark
+# background, shadows), the grey residual with the take's median.
+IOU_LOST, IOU_UNCERTAIN = 0.45, 0.75     # fraction of the anchor frame's overlap
+RESIDUAL_LOST, RESIDUAL_UNCERTAIN = 4.0, 2.5   # times the take's median residual
+MIN_ANCHOR_IOU = 0.5     # below this the foreground masks of a view are too poor to use
 
 
 @dataclass
@@ -99,6 +102,10 @@ def _blend_states(a, b, w):
         out.cameras = [ca.replace(s=float(np.exp((1 - w) * np.log(ca.s) + w * np.log(cb.s))))
                        for ca, cb in zip(a.cameras, b.cameras)]
     return out
+
+
+def anchor_frames_all(anchors):
+    return [a.frame for a in anchors]
 
 
 class Cancelled(Exception):
@@ -194,7 +201,8 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
 
     tracker = DifferentialTracker(body, calibrated, settings)
 
-    # Background models from frames spread over the take
+    # Background models from frames spread over the take; at the anchor frames the model's
+    # (dilated) silhouette says where the person is, which keeps a slow mover out of it.
     sample_frames = np.unique(np.linspace(frames.start, frames.stop - 1,
                                           min(25, len(frames))).astype(int))
     log(f"background: {len(sample_frames)} frames per view")
@@ -202,20 +210,40 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
     for f in sample_frames:
         for c, img in enumerate(source.colour(int(f))):
             per_view[c].append(img)
-    backgrounds = [estimate_background(imgs) if len(imgs) >= 5 else None for imgs in per_view]
+    exclude = [[] for _ in views]
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (9, 9))
+    for a in anchor_frames_all(inside):
+        renders_a = tracker.render_views(state_at(a), want=())
+        for c, img in enumerate(source.colour(a)):
+            mask = cv2.dilate((renders_a[c].label >= 0).astype(np.uint8), kernel) > 0
+            exclude[c].append((img, mask))
+    backgrounds = [estimate_background(imgs, exclude=exclude[c]) if len(imgs) >= 5 else None
+                   for c, imgs in enumerate(per_view)]
     use_bg = [bg is not None for bg in backgrounds]
     # A view whose background swallowed the person (who stood still) gives no silhouette.
     a0 = inside[0].frame
-    st0 = state_at(a0)
-    r0 = tracker.render_views(st0, want=())
+    r0 = tracker.render_views(state_at(a0), want=())
     colour0 = source.colour(a0)
     for c in range(len(views)):
         if use_bg[c]:
-            cov = model_coverage(r0[c].label >= 0, backgrounds[c].foreground(colour0[c]))
+            bg = backgrounds[c]
+            cov = model_coverage(r0[c].label >= 0, bg.foreground(colour0[c]) & bg.known,
+                                 bg.known)
             if cov < 0.5:
                 use_bg[c] = False
                 log(f"view '{views[c]}': background model unreliable here "
                     f"(covers {cov:.0%} of the body); silhouettes off")
+    # Overlap of model and foreground at the anchors: the reference for the status.
+    ref_iou = np.full(len(views), np.nan)
+    for c in range(len(views)):
+        if use_bg[c]:
+            fg = backgrounds[c].foreground(colour0[c])
+            ref_iou[c] = silhouette_iou(r0[c].label >= 0, fg)
+            if ref_iou[c] < MIN_ANCHOR_IOU:
+                use_bg[c] = False
+                log(f"view '{views[c]}': foreground and model overlap only {ref_iou[c]:.0%} "
+                    "at the anchor; silhouettes off")
+                ref_iou[c] = np.nan
 
     def images(frame):
         out = []
@@ -257,8 +285,9 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
                 raise Cancelled(out)
             ims1 = images(f)
             new, rep = tracker.step(st, ims, ims1, prev, renders)
-            out[f] = (new, rep)
             prev, st, ims, renders = st, new, ims1, rep.renders
+            rep.renders = None      # full-size images: keep them only for the next step
+            out[f] = (new, rep)
             done += 1
             if progress is not None:
                 progress(done, total)
@@ -285,11 +314,11 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
         log("cancelled: keeping the frames tracked so far")
 
     return _make_result(body, views, plates, factors, states, reports, calibrated, init,
-                        anchor_frames, frames, cancelled)
+                        anchor_frames, frames, cancelled, ref_iou)
 
 
 def _make_result(body, views, plates, factors, states, reports, calibrated, init,
-                 anchor_frames, frames, cancelled):
+                 anchor_frames, frames, cancelled, ref_iou):
     order = sorted(states)
     F = len(order)
     joints3d = np.zeros((F, 17, 3))
@@ -327,11 +356,12 @@ def _make_result(body, views, plates, factors, states, reports, calibrated, init
         if f in anchor_frames:
             status.append("ok")
             continue
-        ious = iou[i][np.isfinite(iou[i])]
+        rel = iou[i] / ref_iou
+        rel = rel[np.isfinite(rel)]
         worst_res = res_all[i].max()
-        if len(ious) and ious.max() < IOU_LOST:
+        if (len(rel) and np.median(rel) < IOU_LOST) or worst_res > RESIDUAL_LOST * med:
             status.append("lost")
-        elif (len(ious) and ious.min() < IOU_UNCERTAIN) or worst_res > RESIDUAL_UNCERTAIN * med:
+        elif (len(rel) and rel.min() < IOU_UNCERTAIN) or worst_res > RESIDUAL_UNCERTAIN * med:
             status.append("uncertain")
         else:
             status.append("ok")
