@@ -92,8 +92,9 @@ def contact_sheet(plates, result, *, cameras=None, frames=None, columns=6, cell_
         When given (calibrated takes), the model's support map is rendered and tinted.
     frames : list of int, optional
         Frames to show (default: ``columns`` evenly spread over the result).
-    crop : bool
-        Crop every cell of a view to the box around the body over the frames shown.
+    crop : bool or "each"
+        Crop every cell of a view to the box around the body over the frames shown, or with
+        "each", every cell to the body in its own frame (for a subject crossing the view).
     """
     offsets = offsets or {}
     if frames is None:
@@ -107,7 +108,7 @@ def contact_sheet(plates, result, *, cameras=None, frames=None, columns=6, cell_
     rows = []
     for view, plate in plates.items():
         box = None
-        if crop:
+        if crop and crop != "each":
             shown = np.concatenate([result.joints2d[view][index[f]] for f in frames])
             box = _crop_box(shown, plate.image_size)
         cells = []
@@ -121,6 +122,8 @@ def contact_sheet(plates, result, *, cameras=None, frames=None, columns=6, cell_
                                want=()).label
             status = result.status[i]
             cell = draw_overlay(image, result.joints2d[view][i], label, None, status)
+            if crop == "each":
+                box = _crop_box(result.joints2d[view][i], plate.image_size, margin=0.35)
             if box is not None:
                 cell = cell[box[1]:box[3], box[0]:box[2]]
             cell = draw_overlay(cell, np.full((17, 2), np.nan), None, f"{view} {f} {status}",
@@ -128,5 +131,9 @@ def contact_sheet(plates, result, *, cameras=None, frames=None, columns=6, cell_
             h, w = cell.shape[:2]
             cells.append(cv2.resize(cell, (cell_width, int(round(h * cell_width / w))),
                                     interpolation=cv2.INTER_AREA))
-        rows.append(np.hstack(cells))
+        for k in range(0, len(cells), columns):
+            row = cells[k:k + columns]
+            while len(row) < min(columns, len(cells)):   # pad a short last row
+                row.append(np.zeros_like(cells[0]))
+            rows.append(np.hstack(row))
     return np.vstack(rows)

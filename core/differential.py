@@ -26,7 +26,7 @@ import cv2
 import numpy as np
 
 from . import se3
-from .background import signed_distance, silhouette_iou
+from .background import model_coverage, signed_distance, silhouette_iou
 from .body import Pose
 from .image_motion import (Accumulated, Term, accumulate, assemble, image_with_gradients,
                            sample)
@@ -124,6 +124,7 @@ class StepReport:
     cost: float
     iterations: int
     renders: list = field(default_factory=list)   # per view RenderResult at the new pose
+    coverage: np.ndarray = None   # (V,) fraction of the model's silhouette inside the foreground
 
 
 class DifferentialTracker:
@@ -428,13 +429,15 @@ class DifferentialTracker:
         renders = self.render_views(state)
         residual = np.zeros(V)
         iou = np.full(V, np.nan)
+        coverage = np.full(V, np.nan)
         for c in range(V):
             acc = accs.get((c, "flow"))
             if acc is not None and acc.inside.any():
                 residual[c] = 255.0 * np.mean(np.abs(acc.residual[acc.inside]))
             if images_t1[c].foreground is not None:
                 iou[c] = silhouette_iou(renders[c].label >= 0, images_t1[c].foreground)
-        return state, StepReport(residual, iou, cost, total_iters, renders)
+                coverage[c] = model_coverage(renders[c].label >= 0, images_t1[c].foreground)
+        return state, StepReport(residual, iou, cost, total_iters, renders, coverage)
 
     def _difference(self, target, state):
         """Parameter vector that moves ``state`` to ``target`` (to first order)."""

@@ -82,6 +82,11 @@ IK_PRIOR_M = 0.01
 LR_PAIRS = tuple((f"l_{j}", f"r_{j}") for j in
                  ("shoulder", "elbow", "wrist", "hip", "knee", "ankle", "toe"))
 
+# Limb parts whose depth can flip in one view: (pivot joint, joints beyond it).
+LIMB_FLIPS = tuple((f"{s}_{a}", tuple(f"{s}_{j}" for j in rest)) for s in ("l", "r")
+                   for a, *rest in (("shoulder", "elbow", "wrist"), ("elbow", "wrist"),
+                                    ("hip", "knee", "ankle", "toe"), ("knee", "ankle", "toe")))
+
 # A joint this many pixels (and this many times the view's median error) off the fit is named.
 OUTLIER_PX = 4.0 * LOSS_SCALE_PX
 OUTLIER_RATIO = 5.0
@@ -928,6 +933,7 @@ class _Fit:
         state = self.start(f)
         state, cost, problem = _fit(self.kin, obs, w, state,
                                     **self.options(state, f, fit_dims=self.fit_dims))
+        state, cost = self._explore_limbs(state, cost, f)
         mirrored = self.mirrored(state, f)
         if mirrored is not None:
             alt, alt_cost, _ = _fit(self.kin, obs, w, mirrored,
@@ -945,6 +951,42 @@ class _Fit:
                     f"well (rms {alt_rms:.1f} px vs {rms:.1f} px, joints {1000 * differ:.0f} mm "
                     "apart); the 3D pose may be mirrored: click this frame in another view")
         return state
+
+    def _explore_limbs(self, state, cost, f):
+        """Try each limb (and each lower limb) turned to its depth mirror image, §2.6's
+        ambiguity of a single view: a bone pointing towards the camera projects like one
+        pointing away. Local fits cannot cross between the two, so each is started by inverse
+        kinematics from the reflected joints and kept if it fits better (clicks and prior)."""
+        normal = self.depth_direction(state, f)
+        if normal is None:
+            return state, cost
+        obs, w = self.obs[f:f + 1], self.weights[f:f + 1]
+        names = self.kin.structure.dof_names
+        for _ in range(2):
+            improved = False
+            for pivot, distal in LIMB_FLIPS:
+                Y = self.kin.forward(state.angles, state.dims)[0][0]
+                X = Y @ state.roots[0, :3, :3].T + state.roots[0, :3, 3]
+                p = X[JOINT_INDEX[pivot]]
+                n = normal(p)
+                target = X.copy()
+                rows = [JOINT_INDEX[j] for j in distal]
+                target[rows] -= 2.0 * ((X[rows] - p) @ n)[:, None] * n
+                moved = [k for k, name in enumerate(names)
+                         if name.startswith((pivot + "_",) + tuple(j + "_" for j in distal))]
+                angles = state.angles[0].copy()
+                angles[moved] = self.kin.prior_mean[moved]
+                root, angles = _fit_3d(self.kin, target, state.dims, state.roots[0], angles,
+                                       free_root=self.calibrated)
+                trial = state.copy()
+                trial.roots[0], trial.angles[0] = root, angles
+                trial, trial_cost, _ = _fit(self.kin, obs, w, trial,
+                                            **self.options(trial, f, fit_dims=self.fit_dims))
+                if trial_cost < cost - 1e-6:
+                    state, cost, improved = trial, trial_cost, True
+            if not improved:
+                break
+        return state, cost
 
     def _pose_difference(self, a, b):
         Ya = self.kin.forward(a.angles, a.dims)[0][0]
@@ -1067,7 +1109,7 @@ def _rms(err):
     return float(np.sqrt(np.mean(e ** 2))) if e.size else 0.0
 
 
-def _fit_3d(kin, target, dims, root, angles):
+def _fit_3d(kin, target, dims, root, angles, free_root=True):
     """Inverse kinematics: root and angles that put the joints on 3D points (metres).
 
     Parameters
@@ -1076,6 +1118,8 @@ def _fit_3d(kin, target, dims, root, angles):
         NaN where unknown.
     root : array, shape (4, 4)
     angles : array, shape (n,)
+    free_root : bool
+        Fit the root too, or keep ``root``.
 
     Returns
     -------
@@ -1098,8 +1142,14 @@ def _fit_3d(kin, target, dims, root, angles):
         J = np.vstack([J, np.hstack([np.zeros((n, 6)), np.diag(wa)])])
         return r, J
 
-    lo = np.concatenate([np.full(6, -np.inf), kin.lower])
-    hi = np.concatenate([np.full(6, np.inf), kin.upper])
+    big = np.inf if free_root else 0.0
+    lo = np.concatenate([np.full(6, -big), kin.lower])
+    hi = np.concatenate([np.full(6, big), kin.upper])
+    if not free_root:
+        # Zero-width bounds are refused by least_squares: pin the root with a tiny box.
+        lo[:6], hi[:6] = root[:3, 3].tolist() + [-1e-12] * 3, root[:3, 3].tolist() + [1e-12] * 3
+        lo[:3] -= 1e-12
+        hi[:3] += 1e-12
     x0 = np.clip(np.concatenate([root[:3, 3], np.zeros(3), angles]), lo, hi)
     res = least_squares(lambda x: fun(x)[0], x0, jac=lambda x: fun(x)[1], bounds=(lo, hi),
                         method="trf", loss="soft_l1", f_scale=0.05, x_scale="jac",
@@ -1164,6 +1214,14 @@ class _CalibratedFit(_Fit):
                 best = (fitted, cost)
         return best[0]
 
+    def depth_direction(self, state, f):
+        """For a frame clicked in one view only: the viewing ray's direction at a point."""
+        clicked = [v for v in range(len(self.views)) if np.isfinite(self.obs[f, v]).any()]
+        if len(clicked) != 1:
+            return None
+        centre = self.cams[clicked[0]].center
+        return lambda p: (p - centre) / np.linalg.norm(p - centre)
+
     def mirrored(self, state, f):
         """The depth-flipped pose of a frame clicked in one view only (else None): the joints
         reflected in the plane through the pelvis facing the camera."""
@@ -1202,6 +1260,11 @@ class _UncalibratedFit(_Fit):
                             f"joints clicked (need {_MIN_VIEW_JOINTS} to place an uncalibrated "
                             "view); view left out of this frame")
             self.weights[f, v] = 0.0
+        if self.usable.sum() == 1:
+            # One scaled orthographic view cannot tell a bone's length from its foreshortening
+            # (Bregler & Malik §3.1): keep the template's proportions; several anchors or
+            # views, or model fine-tuning over the sequence (§2.7), can fit them.
+            self.fit_dims = False
 
     def options(self, state, f, fit_dims):
         free = np.array([[c is not None for c in row] for row in state.cameras])
@@ -1255,6 +1318,14 @@ class _UncalibratedFit(_Fit):
                 if best is None or cost < best[1]:
                     best = (fitted.cameras[0][v], cost)
         return best[0]
+
+    def depth_direction(self, state, f):
+        """For a frame with one usable view: that camera's viewing direction."""
+        views = [v for v in range(len(self.views)) if state.cameras[0][v] is not None]
+        if len(views) != 1:
+            return None
+        forward = state.cameras[0][views[0]].R[2]
+        return lambda p: forward
 
     def mirrored(self, state, f):
         """The depth-flipped pose: the joints reflected in the first view's image plane, posed

@@ -197,6 +197,17 @@ class ImageLikelihood:
         flatten the posterior when many particles should survive a frame.
     min_pixels : int
         Limbs showing fewer pixels at the reference are left out of that view.
+    min_cos : float
+        Points are used only where the surface faces the camera at least this much
+        (``cos(alpha)``): at the rims a small error of the estimate, or a body a little wider
+        or narrower than the model, puts background into the appearance.
+    appearance_rate : float
+        Weight of I(t-1) in a point's grey value; the rest is the point's previous value.
+        1 is the paper's appearance (eq. 2, the previous image only); below 1 the points keep
+        an exponentially fading memory of their texture, which resists drift: a small error
+        of one estimate no longer becomes the next frame's appearance in full.
+    keep_frames : int
+        References a point may go unseen (hidden, turned away) before it is dropped.
     occlusion_margin : float
         Pixels by which a limb must clear an occluder's silhouette at the reference before
         their occlusion test is skipped for all particles (particles stay near the reference).
@@ -205,7 +216,8 @@ class ImageLikelihood:
     """
 
     def __init__(self, body, cameras, *, sigma_image=8.0, epsilon=0.1, p_occluded=None,
-                 n_points=40, beta=1.0, min_pixels=12, occlusion_margin=12.0, seed=0):
+                 n_points=40, beta=1.0, min_pixels=12, min_cos=0.2, appearance_rate=1.0,
+                 keep_frames=4, occlusion_margin=12.0, seed=0):
         if not cameras:
             raise ZoopraxisError("ImageLikelihood: no cameras given")
         for cam in cameras:
@@ -228,6 +240,13 @@ class ImageLikelihood:
         self.n_points = int(n_points)
         self.beta = float(beta)
         self.min_pixels = int(min_pixels)
+        self.min_cos = float(min_cos)
+        if not 0 < appearance_rate <= 1:
+            raise ZoopraxisError(f"ImageLikelihood: appearance_rate must be in (0, 1], got "
+                                 f"{appearance_rate}")
+        self.appearance_rate = float(appearance_rate)
+        self.keep_frames = int(keep_frames)
+        self._pools = None
         self.occlusion_margin = float(occlusion_margin)
         self.rng = np.random.default_rng(seed)
         self.surfaces = None
@@ -236,6 +255,12 @@ class ImageLikelihood:
 
     def set_reference(self, seg2world, images):
         """Map the previous images onto the model at the previous estimate (eq. 2).
+
+        Points already on the limbs whose render at the reference shows them (in view, facing
+        the camera, not hidden) take their grey value from I(t-1), blended into their old value
+        by ``appearance_rate``; points hidden for more than ``keep_frames`` references are
+        dropped, and every visible limb is topped up to ``n_points`` fresh points drawn from
+        its visible pixels. Only the points seen at the reference are compared.
 
         Parameters
         ----------
@@ -248,8 +273,19 @@ class ImageLikelihood:
             raise ZoopraxisError(f"ImageLikelihood: {len(self.cameras)} views but "
                                  f"{len(images)} images")
         seg2world = np.asarray(seg2world, float)
-        self.surfaces = [self._surface_points(cam, seg2world, self._check_image(cam, image))
-                         for cam, image in zip(self.cameras, images)]
+        if self._pools is None:
+            self._pools = [None] * len(self.cameras)
+        self.surfaces = []
+        for v, (cam, image) in enumerate(zip(self.cameras, images)):
+            self._pools[v], surf = self._update_pool(cam, seg2world,
+                                                     self._check_image(cam, image),
+                                                     self._pools[v])
+            self.surfaces.append(surf)
+
+    def reset(self):
+        """Forget the appearance (start again from the next reference)."""
+        self._pools = None
+        self.surfaces = None
 
     @staticmethod
     def _check_image(cam, image):
@@ -258,42 +294,96 @@ class ImageLikelihood:
                                  f"{image.shape[0]}, the camera expects {cam.width}x{cam.height}")
         return image
 
-    def _surface_points(self, cam, seg2world, image):
+    def _update_pool(self, cam, seg2world, image, pool):
+        """Refresh one view's pool of surface points at the reference; returns the pool and the
+        :class:`SurfacePoints` of the points seen there."""
         res = render.render(cam, seg2world, self.prims, want=("point", "normal"))
-        labels = res.label.ravel()
-        points = res.point.reshape(-1, 3)
-        normals = res.normal.reshape(-1, 3)
-        grey = image.ravel()
+        H, W = image.shape
         world2seg = np.linalg.inv(seg2world)
-        segments, chunks_p, chunks_n, chunks_v = [], [], [], []
+        if pool is None:
+            pool = {"segment": np.zeros(0, int), "point": np.zeros((0, 3)),
+                    "normal": np.zeros((0, 3)), "value": np.zeros(0, np.float32),
+                    "missed": np.zeros(0, int)}
+        seen = np.zeros(0, bool)
+        if len(pool["segment"]):
+            T = seg2world[pool["segment"]]
+            X = np.einsum("pij,pj->pi", T[:, :3, :3], pool["point"]) + T[:, :3, 3]
+            n = np.einsum("pij,pj->pi", T[:, :3, :3], pool["normal"])
+            uv = cam.project(X)
+            z = cam.depth(X)
+            col, row = np.rint(uv[:, 0]).astype(int), np.rint(uv[:, 1]).astype(int)
+            inside = (col >= 0) & (col < W) & (row >= 0) & (row < H) & (z > 0)
+            col, row = np.where(inside, col, 0), np.where(inside, row, 0)
+            seen = inside & (res.label[row, col] == pool["segment"]) \
+                & (np.abs(res.depth[row, col] - z) < _DEPTH_MARGIN) \
+                & (self._facing(cam, X, n) > self.min_cos)
+            if seen.any():
+                now = cv2.remap(image, uv[seen, 0].astype(np.float32)[None],
+                                uv[seen, 1].astype(np.float32)[None], cv2.INTER_LINEAR,
+                                borderMode=cv2.BORDER_REPLICATE)[0]
+                a = np.float32(self.appearance_rate)
+                pool["value"][seen] = (1 - a) * pool["value"][seen] + a * now
+            pool["missed"] = np.where(seen, 0, pool["missed"] + 1)
+            keep = pool["missed"] <= self.keep_frames
+            pool = {k: v[keep] for k, v in pool.items()}
+            seen = seen[keep]
+        # Top every visible limb up with fresh points from its visible, camera-facing pixels.
+        labels = res.label.ravel()
+        points = res.point.reshape(-1, 3).astype(float)
+        normals = res.normal.reshape(-1, 3).astype(float)
+        facing = self._facing(cam, points, normals) > self.min_cos
+        grey = image.ravel()
+        counts = np.bincount(pool["segment"], minlength=self.body.n_segments)
+        fresh = {k: [] for k in pool}
         for k in range(self.body.n_segments):
-            pixels = np.flatnonzero(labels == k)
+            missing = self.n_points - counts[k]
+            if missing <= 0:
+                continue
+            pixels = np.flatnonzero((labels == k) & facing)
             if pixels.size < self.min_pixels:
                 continue
-            pick = pixels[self.rng.integers(0, pixels.size, self.n_points)]
+            pick = pixels[self.rng.integers(0, pixels.size, missing)]
             R, t = world2seg[k, :3, :3], world2seg[k, :3, 3]
-            segments.append(k)
-            chunks_p.append(points[pick] @ R.T + t)
-            chunks_n.append(normals[pick] @ R.T)
-            chunks_v.append(grey[pick])
-        if not segments:
+            fresh["segment"].append(np.full(missing, k))
+            fresh["point"].append(points[pick] @ R.T + t)
+            fresh["normal"].append(normals[pick] @ R.T)
+            fresh["value"].append(grey[pick])
+            fresh["missed"].append(np.zeros(missing, int))
+        if fresh["segment"]:
+            pool = {k: np.concatenate([pool[k]] + fresh[k]) for k in pool}
+            seen = np.concatenate([seen, np.ones(len(pool["segment"]) - len(seen), bool)])
+        order = np.argsort(pool["segment"], kind="stable")
+        pool = {k: v[order] for k, v in pool.items()}
+        seen = seen[order]
+        return pool, self._surface_points(cam, seg2world, pool, seen)
+
+    @staticmethod
+    def _facing(cam, X, normals):
+        """``cos(alpha)`` of surface points (N, 3) with unit normals (N, 3), world frame."""
+        sight = X - cam.center
+        return -np.sum(normals * sight, axis=1) / np.linalg.norm(sight, axis=1)
+
+    def _surface_points(self, cam, seg2world, pool, seen):
+        segment = pool["segment"][seen]
+        if segment.size == 0:
             return SurfacePoints((), (), np.zeros((4, 0), np.float32),
                                  np.zeros((3, 0), np.float32), np.zeros(0, np.float32), [])
-        P = np.concatenate(chunks_p)
+        segments, starts = np.unique(segment, return_index=True)
+        ends = np.append(starts[1:], segment.size)
+        P = pool["point"][seen]
         surf = SurfacePoints(
-            tuple(segments),
-            tuple(slice(i * self.n_points, (i + 1) * self.n_points) for i in range(len(segments))),
+            tuple(int(k) for k in segments),
+            tuple(slice(int(a), int(b)) for a, b in zip(starts, ends)),
             np.vstack([P.T, np.ones(len(P))]).astype(np.float32),
-            np.concatenate(chunks_n).T.astype(np.float32),
-            np.concatenate(chunks_v).astype(np.float32), [])
+            pool["normal"][seen].T.astype(np.float32), pool["value"][seen].astype(np.float32),
+            [])
         surf.pairs = self._pairs(cam, seg2world, surf)
         # Points the capsule test calls hidden although the z-buffer saw them lie where the
-        # capsules are a poor fit; drop them so the test agrees with the render at the reference.
+        # capsules are a poor fit; leave them out so the test agrees with the render here.
         geometry = self._project(cam, seg2world[None], surf, normals=False)
         hidden = self._occluded(cam, surf, geometry)[0]
-        keep = ~hidden
-        if not keep.all():
-            surf = self._subset(surf, keep)
+        if hidden.any():
+            surf = self._subset(surf, ~hidden)
         return surf
 
     def _subset(self, surf, keep):

@@ -345,6 +345,7 @@ class ParticleFilter:
             parameter is drawn uniformly) and spread.
         """
         self._images = self._prepare(images)
+        self.likelihood.reset()
         self.state = self.prior.init_state(pose, self.n_particles, self.rng, **init_options)
         roots, angles = self.prior.poses(self.state)
         self._seg2world = self.kinematics.seg2world(roots, angles)

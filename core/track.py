@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 
 from . import se3
-from .background import estimate_background, model_coverage, silhouette_iou
+from .background import estimate_background, model_coverage
 from .body import Pose
 from .camera import ScaledOrthoCamera
 from .differential import DifferentialTracker, Settings, State, prepare_images
@@ -25,12 +25,13 @@ from .markers import check_markers
 from .plates import to_gray_float
 from .result import TrackResult
 
-# Status thresholds. The silhouette overlap of model and foreground is compared with the
-# overlap at the anchor frame of the same view (masks are imperfect: dark clothes on a dark
-# background, shadows), the grey residual with the take's median.
-IOU_LOST, IOU_UNCERTAIN = 0.45, 0.75     # fraction of the anchor frame's overlap
+# Status thresholds. The silhouette fit is the fraction of the model's silhouette that lies in
+# the foreground (shadows and loose clothes make the foreground larger than the model, so the
+# overlap the other way says little), compared with the same fraction at the anchor frame; the
+# grey residual is compared with the take's median.
+FIT_LOST, FIT_UNCERTAIN = 0.6, 0.85          # fraction of the anchor frame's silhouette fit
 RESIDUAL_LOST, RESIDUAL_UNCERTAIN = 4.0, 2.5   # times the take's median residual
-MIN_ANCHOR_IOU = 0.5     # below this the foreground masks of a view are too poor to use
+MIN_ANCHOR_FIT = 0.6     # below this the foreground masks of a view are too poor to use
 
 
 @dataclass
@@ -169,7 +170,8 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
     if init is None:
         from .initialize import initialize
 
-        res = initialize(inside, {v: cameras[v] for v in views} if calibrated else None,
+        res = initialize(inside, {v: cameras[v] if calibrated else tuple(plates[v].image_size)
+                                  for v in views},
                          template=template, calibrated=calibrated, views=views)
         init = Initial(res.body, res.poses, res.cameras, getattr(res, "view_cameras", None),
                        list(getattr(res, "warnings", [])))
@@ -234,16 +236,16 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
                 log(f"view '{views[c]}': background model unreliable here "
                     f"(covers {cov:.0%} of the body); silhouettes off")
     # Overlap of model and foreground at the anchors: the reference for the status.
-    ref_iou = np.full(len(views), np.nan)
+    ref_fit = np.full(len(views), np.nan)
     for c in range(len(views)):
         if use_bg[c]:
             fg = backgrounds[c].foreground(colour0[c])
-            ref_iou[c] = silhouette_iou(r0[c].label >= 0, fg)
-            if ref_iou[c] < MIN_ANCHOR_IOU:
+            ref_fit[c] = model_coverage(r0[c].label >= 0, fg)
+            if ref_fit[c] < MIN_ANCHOR_FIT:
                 use_bg[c] = False
-                log(f"view '{views[c]}': foreground and model overlap only {ref_iou[c]:.0%} "
-                    "at the anchor; silhouettes off")
-                ref_iou[c] = np.nan
+                log(f"view '{views[c]}': only {ref_fit[c]:.0%} of the model lies in the "
+                    "foreground at the anchor; silhouettes off")
+                ref_fit[c] = np.nan
 
     def images(frame):
         out = []
@@ -314,11 +316,11 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
         log("cancelled: keeping the frames tracked so far")
 
     return _make_result(body, views, plates, factors, states, reports, calibrated, init,
-                        anchor_frames, frames, cancelled, ref_iou)
+                        anchor_frames, frames, cancelled, ref_fit)
 
 
 def _make_result(body, views, plates, factors, states, reports, calibrated, init,
-                 anchor_frames, frames, cancelled, ref_iou):
+                 anchor_frames, frames, cancelled, ref_fit):
     order = sorted(states)
     F = len(order)
     joints3d = np.zeros((F, 17, 3))
@@ -327,6 +329,7 @@ def _make_result(body, views, plates, factors, states, reports, calibrated, init
     roots = np.zeros((F, 4, 4))
     angles = np.zeros((F, body.n_dofs))
     iou = np.full((F, len(views)), np.nan)
+    fit = np.full((F, len(views)), np.nan)
     ref = None
     if not calibrated:
         # Body-centred frame: the body as camera 0 saw it at the first anchor, made Z-up.
@@ -349,6 +352,8 @@ def _make_result(body, views, plates, factors, states, reports, calibrated, init
             if rep is not None:
                 residual[v][i] = rep.residual[c]
                 iou[i, c] = rep.iou[c]
+                if rep.coverage is not None:
+                    fit[i, c] = rep.coverage[c]
     status = []
     res_all = np.array([[residual[v][i] for v in views] for i in range(F)])
     med = np.median(res_all[res_all > 0]) if np.any(res_all > 0) else 1.0
@@ -356,12 +361,12 @@ def _make_result(body, views, plates, factors, states, reports, calibrated, init
         if f in anchor_frames:
             status.append("ok")
             continue
-        rel = iou[i] / ref_iou
+        rel = fit[i] / ref_fit
         rel = rel[np.isfinite(rel)]
         worst_res = res_all[i].max()
-        if (len(rel) and np.median(rel) < IOU_LOST) or worst_res > RESIDUAL_LOST * med:
+        if (len(rel) and np.median(rel) < FIT_LOST) or worst_res > RESIDUAL_LOST * med:
             status.append("lost")
-        elif (len(rel) and rel.min() < IOU_UNCERTAIN) or worst_res > RESIDUAL_UNCERTAIN * med:
+        elif (len(rel) and rel.min() < FIT_UNCERTAIN) or worst_res > RESIDUAL_UNCERTAIN * med:
             status.append("uncertain")
         else:
             status.append("ok")
@@ -371,6 +376,7 @@ def _make_result(body, views, plates, factors, states, reports, calibrated, init
                  "dof_names": list(body.dof_names)}
     extra = {"tracker": "differential", "anchors": [int(a) for a in anchor_frames],
              "silhouette_iou": np.round(np.nan_to_num(iou, nan=-1.0), 4).tolist(),
+             "silhouette_fit": np.round(np.nan_to_num(fit, nan=-1.0), 4).tolist(),
              "cancelled": cancelled,
              "warnings": list(init.warnings)}
     return TrackResult(mode="calibrated" if calibrated else "uncalibrated", fps=float(fps),
