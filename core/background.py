@@ -86,26 +86,49 @@ def estimate_background(frames, *, tolerance=None, exclude=()):
     BackgroundModel
     """
     stack = np.stack([_as_float(f) for f in frames])                 # (N, H, W, 3)
+    N, H, W, _ = stack.shape
     median = np.median(stack, axis=0)
-    noise = float(1.4826 * np.median(np.linalg.norm(stack - median, axis=3))) + 1e-3
+    noise = float(1.4826 * np.median(np.sqrt(((stack[::3] - median) ** 2).sum(axis=3)))) + 1e-3
     tol = max(4.0 * noise, 0.05) if tolerance is None else tolerance
-    person = np.zeros(stack.shape[:3], bool)                          # (N, H, W)
+    tol2 = np.float32(tol * tol)
+
+    def dist2(a, b):
+        d = a - b
+        return np.einsum("...c,...c->...", d, d)
+
+    # Choose each pixel's centre sample on a half-resolution copy (the choice varies slowly
+    # across the image), then average at full resolution.
+    small = np.stack([cv2.pyrDown(f) for f in stack])
+    person_s = np.zeros(small.shape[:3], bool)
+    person = np.zeros(stack.shape[:3], bool)
     for image, mask in exclude:
         ref = _as_float(image)
-        person |= mask[None] & (np.linalg.norm(stack - ref, axis=3) < tol)
-    best_count = np.zeros(stack.shape[1:3], np.int32)
-    best_sum = median.copy()
-    for i in range(len(stack)):
-        close = (np.linalg.norm(stack - stack[i], axis=3) < tol) & ~person   # (N, H, W)
-        count = np.where(person[i], 0, close.sum(axis=0))
+        person |= mask[None] & (dist2(stack, ref) < tol2)
+    if exclude:
+        person_s = np.stack([cv2.resize(p.astype(np.uint8), (small.shape[2], small.shape[1]),
+                                        interpolation=cv2.INTER_NEAREST) > 0 for p in person])
+    best_count = np.zeros(small.shape[1:3], np.int32)
+    best_index = np.zeros(small.shape[1:3], np.int64)
+    for i in range(N):
+        close = (dist2(small, small[i]) < tol2) & ~person_s
+        count = np.where(person_s[i], 0, close.sum(axis=0))
         better = count > best_count
-        if np.any(better):
-            mean = (stack * close[..., None]).sum(axis=0) / np.maximum(count, 1)[..., None]
-            best_sum[better] = mean[better]
-            best_count[better] = count[better]
+        best_count[better] = count[better]
+        best_index[better] = i
+    index = cv2.resize(best_index.astype(np.float32), (W, H),
+                       interpolation=cv2.INTER_NEAREST).astype(np.int64)
+    count_full = cv2.resize(best_count.astype(np.float32), (W, H),
+                            interpolation=cv2.INTER_NEAREST)
+    centre = np.take_along_axis(stack, index[None, :, :, None], axis=0)[0]
+    close = (dist2(stack, centre) < tol2) & ~person
+    n_close = close.sum(axis=0)
+    best_sum = np.where((n_close > 0)[..., None],
+                        (stack * close[..., None]).sum(axis=0) / np.maximum(n_close, 1)[..., None],
+                        median)
+    best_count = np.minimum(n_close, count_full.astype(np.int64))
     image = best_sum.astype(np.float32)
-    known = best_count >= max(2, len(stack) // 8)
-    diffs = np.linalg.norm(stack - image, axis=3)[:, known]
+    known = best_count >= max(2, N // 8)
+    diffs = np.sqrt(dist2(stack[::3], image))[:, known]
     sigma = float(1.4826 * np.median(diffs)) + 1e-3 if diffs.size else noise
     return BackgroundModel(image, sigma, known)
 

@@ -489,9 +489,9 @@ class _Problem:
         dense = not sparse.issparse(self.evaluate(x0)[1])
         result = least_squares(
             lambda x: self.evaluate(x)[0], x0, jac=lambda x: self.evaluate(x)[1],
-            bounds=(lo, hi), method="trf", loss=_soft_l1(self.m_obs, self.loss_scale),
-            f_scale=1.0, x_scale="jac", max_nfev=max_nfev, xtol=1e-10, ftol=1e-10,
-            gtol=1e-10, tr_solver="exact" if dense else "lsmr")
+            bounds=(lo, hi), method="dogbox", loss=_soft_l1(self.m_obs, self.loss_scale),
+            f_scale=1.0, x_scale=1.0, max_nfev=max_nfev,
+            tr_solver="exact" if dense else "lsmr")
         return self.unpack(result.x), float(result.cost)
 
     def errors(self, state=None):
@@ -977,7 +977,7 @@ class _Fit:
                 angles = state.angles[0].copy()
                 angles[moved] = self.kin.prior_mean[moved]
                 root, angles = _fit_3d(self.kin, target, state.dims, state.roots[0], angles,
-                                       free_root=self.calibrated)
+                                       free_root=False, dofs=moved)
                 trial = state.copy()
                 trial.roots[0], trial.angles[0] = root, angles
                 trial, trial_cost, _ = _fit(self.kin, obs, w, trial,
@@ -1109,7 +1109,7 @@ def _rms(err):
     return float(np.sqrt(np.mean(e ** 2))) if e.size else 0.0
 
 
-def _fit_3d(kin, target, dims, root, angles, free_root=True):
+def _fit_3d(kin, target, dims, root, angles, free_root=True, dofs=None):
     """Inverse kinematics: root and angles that put the joints on 3D points (metres).
 
     Parameters
@@ -1120,6 +1120,8 @@ def _fit_3d(kin, target, dims, root, angles, free_root=True):
     angles : array, shape (n,)
     free_root : bool
         Fit the root too, or keep ``root``.
+    dofs : array of int, optional
+        The angles to fit (default all); the others keep their values.
 
     Returns
     -------
@@ -1127,35 +1129,41 @@ def _fit_3d(kin, target, dims, root, angles, free_root=True):
     angles : array, shape (n,)
     """
     seen = np.isfinite(target).all(axis=-1)
-    R0 = root[:3, :3]
-    n = kin.n_dofs
-    wa = IK_PRIOR_M / kin.prior_sigma
+    R0, p0 = root[:3, :3], root[:3, 3]
+    dofs = np.arange(kin.n_dofs) if dofs is None else np.asarray(dofs)
+    n = len(dofs)
+    base = np.array(angles, float)
+    k = 6 if free_root else 0
+    wa = IK_PRIOR_M / kin.prior_sigma[dofs]
+
+    def split(x):
+        a = base.copy()
+        a[dofs] = x[k:]
+        if free_root:
+            return x[:3], x[3:6], se3.exp_so3(x[3:6]) @ R0, a
+        return p0, None, R0, a
 
     def fun(x):
-        R = se3.exp_so3(x[3:6]) @ R0
-        Y, JA, _ = kin.forward(x[None, 6:], dims)
-        X = Y[0] @ R.T + x[:3]
-        r = np.concatenate([(X - target)[seen].ravel(), wa * (x[6:] - kin.prior_mean)])
-        J_rot = -se3.hat3(X - x[:3]) @ se3.left_jacobian_so3(x[3:6])
-        J = np.concatenate([np.broadcast_to(np.eye(3), J_rot.shape), J_rot, R @ JA[0]],
-                           axis=-1)[seen].reshape(-1, 6 + n)
-        J = np.vstack([J, np.hstack([np.zeros((n, 6)), np.diag(wa)])])
+        p, w, R, a = split(x)
+        Y, JA, _ = kin.forward(a[None], dims)
+        X = Y[0] @ R.T + p
+        r = np.concatenate([(X - target)[seen].ravel(), wa * (x[k:] - kin.prior_mean[dofs])])
+        parts = [R @ JA[0][..., dofs]]
+        if free_root:
+            J_rot = -se3.hat3(X - p) @ se3.left_jacobian_so3(w)
+            parts = [np.broadcast_to(np.eye(3), J_rot.shape), J_rot] + parts
+        J = np.concatenate(parts, axis=-1)[seen].reshape(-1, k + n)
+        J = np.vstack([J, np.hstack([np.zeros((n, k)), np.diag(wa)])])
         return r, J
 
-    big = np.inf if free_root else 0.0
-    lo = np.concatenate([np.full(6, -big), kin.lower])
-    hi = np.concatenate([np.full(6, big), kin.upper])
-    if not free_root:
-        # Zero-width bounds are refused by least_squares: pin the root with a tiny box.
-        lo[:6], hi[:6] = root[:3, 3].tolist() + [-1e-12] * 3, root[:3, 3].tolist() + [1e-12] * 3
-        lo[:3] -= 1e-12
-        hi[:3] += 1e-12
-    x0 = np.clip(np.concatenate([root[:3, 3], np.zeros(3), angles]), lo, hi)
+    lo = np.concatenate([np.full(k, -np.inf), kin.lower[dofs]])
+    hi = np.concatenate([np.full(k, np.inf), kin.upper[dofs]])
+    x0 = np.concatenate([p0, np.zeros(3)])[:k]
+    x0 = np.clip(np.concatenate([x0, base[dofs]]), lo, hi)
     res = least_squares(lambda x: fun(x)[0], x0, jac=lambda x: fun(x)[1], bounds=(lo, hi),
-                        method="trf", loss="soft_l1", f_scale=0.05, x_scale="jac",
-                        max_nfev=100)
-    out = se3.transform(se3.orthonormalize(se3.exp_so3(res.x[3:6]) @ R0), res.x[:3])
-    return out, np.clip(res.x[6:], kin.lower, kin.upper)
+                        method="dogbox", loss="soft_l1", f_scale=0.05, max_nfev=100)
+    p, _, R, a = split(res.x)
+    return se3.transform(se3.orthonormalize(R), p), np.clip(a, kin.lower, kin.upper)
 
 
 class _CalibratedFit(_Fit):
