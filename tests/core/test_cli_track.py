@@ -1,0 +1,87 @@
+"""``python -m zoopraxis track`` end to end on a small synthetic take, and its errors."""
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from zoopraxis.core import result as result_io
+from zoopraxis.core import synth
+
+
+def zoopraxis(*args, cwd=None):
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="1")
+    return subprocess.run([sys.executable, "-m", "zoopraxis", *map(str, args)],
+                          capture_output=True, text=True, cwd=cwd, env=env, timeout=600)
+
+
+@pytest.fixture(scope="module")
+def take(tmp_path_factory):
+    from tests.conftest import shared_data_dir
+
+    data = shared_data_dir()
+    if data is None:
+        pytest.skip("shared data (../shared/data) is not beside this clone")
+    out = tmp_path_factory.mktemp("take")
+    scene, joints = synth.take_from_bvh(data / "cmu_mocap" / "131_02.bvh",
+                                        frames=slice(200, 206), views=2,
+                                        image_size=(320, 240), noise=1.0, clutter=4)
+    synth.write_take(out, scene, joints, marker_noise=1.0)
+    return out
+
+
+def track_args(take, out, *extra):
+    return ["track", "--plate", f"cam0={take / 'cam0'}", "--plate", f"cam1={take / 'cam1'}",
+            "--markers", take / "markers.json", "--calibration", take / "calibration.json",
+            "--out", out, *extra]
+
+
+def test_track_writes_a_result(take, tmp_path):
+    out = tmp_path / "result.json"
+    run = zoopraxis(*track_args(take, out))
+    assert run.returncode == 0, run.stderr
+    assert "track: 6 frames" in run.stdout
+    res = result_io.read_result(out)
+    truth = synth.read_truth(take / "truth.json")
+    assert res.mode == "calibrated" and list(res.frames) == list(range(6))
+    assert np.linalg.norm(res.joints3d - truth["joints3d"], axis=2).mean() < 0.05
+    # never overwrite without --force
+    again = zoopraxis(*track_args(take, out))
+    assert again.returncode == 2 and "exists" in again.stderr
+    assert len(again.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("change, message", [
+    (["--frames", "0:50"], "inside the plate"),
+    (["--offset", "cam7=2"], "view 'cam7'"),
+])
+def test_track_bad_input_is_one_line(take, tmp_path, change, message):
+    run = zoopraxis(*track_args(take, tmp_path / "r.json", *change))
+    assert run.returncode == 2
+    assert message in run.stderr and len(run.stderr.strip().splitlines()) == 1
+
+
+def test_calibration_missing_a_view(take, tmp_path):
+    calib = json.loads((take / "calibration.json").read_text())
+    calib["cameras"] = calib["cameras"][:1]
+    path = tmp_path / "calib.json"
+    path.write_text(json.dumps(calib))
+    args = track_args(take, tmp_path / "r.json")
+    args[args.index("--calibration") + 1] = path
+    run = zoopraxis(*args)
+    assert run.returncode == 2 and "cam1" in run.stderr
+
+
+def test_joint_marked_in_no_view(take, tmp_path):
+    marks = json.loads((take / "markers.json").read_text())
+    for view in marks["anchors"][0]["views"].values():
+        view.pop("r_elbow")
+    path = tmp_path / "markers.json"
+    path.write_text(json.dumps(marks))
+    args = track_args(take, tmp_path / "r.json")
+    args[args.index("--markers") + 1] = path
+    run = zoopraxis(*args)
+    assert run.returncode == 2 and "r_elbow" in run.stderr and "no view" in run.stderr
