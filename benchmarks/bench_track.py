@@ -8,7 +8,7 @@ by the initialization) unless ``--init truth`` is given.
 
 Prints one row per case: MPJPE and Procrustes-aligned MPJPE (mm) against the capture's joints,
 knee and elbow flexion RMSE (degrees, measured on the joints), lost and uncertain frames, frames
-per second of tracking and peak memory.
+per second of tracking, peak memory and the largest limb overlap (mm, sphere proxies).
 
     .venv/bin/python benchmarks/bench_track.py            # all cases (several minutes)
     .venv/bin/python benchmarks/bench_track.py --quick    # 60 frames per case
@@ -118,6 +118,7 @@ def run_case(name, spec, *, quick, init_mode, anchor_every):
             "knee": float(np.sqrt(np.mean(knee ** 2))), "elbow": float(np.sqrt(np.mean(elbow ** 2))),
             "lost": res.status.count("lost"), "uncertain": res.status.count("uncertain"),
             "fps": tracked / elapsed,
+            "overlap": float(np.max(res.extra["limb_overlap_mm"])),
             "mem": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
 
 
@@ -133,7 +134,7 @@ def main(argv=None):
     if not (DATA / "cmu_mocap").is_dir():
         sys.exit(f"no motion capture at {DATA / 'cmu_mocap'} (set ZOOPRAXIS_SHARED_DATA)")
     header = (f"{'case':<13}{'views':>5} {'mode':>5}{'frames':>7}{'MPJPE':>8}{'PA-MPJPE':>9}"
-              f"{'knee°':>7}{'elbow°':>7}{'lost':>5}{'uncert':>7}{'fps':>6}{'MB':>7}")
+              f"{'knee°':>7}{'elbow°':>7}{'lost':>5}{'uncert':>7}{'fps':>6}{'MB':>7}{'overlap':>8}")
     print(header)
     print("-" * len(header))
     for name in args.cases.split(","):
@@ -141,7 +142,8 @@ def main(argv=None):
                      anchor_every=args.anchor_every)
         print(f"{r['case']:<13}{r['views']:>5} {r['mode']:>5}{r['frames']:>7}{r['mpjpe']:>8.1f}"
               f"{r['pa']:>9.1f}{r['knee']:>7.1f}{r['elbow']:>7.1f}{r['lost']:>5}"
-              f"{r['uncertain']:>7}{r['fps']:>6.1f}{r['mem']:>7.0f}", flush=True)
+              f"{r['uncertain']:>7}{r['fps']:>6.1f}{r['mem']:>7.0f}{r['overlap']:>8.1f}",
+              flush=True)
 
 
 if __name__ == "__main__":

@@ -28,6 +28,7 @@ import numpy as np
 from . import se3
 from .background import model_coverage, signed_distance, silhouette_iou
 from .body import Pose
+from .collision import body_proxies, penalty_system
 from .image_motion import (Accumulated, Term, accumulate, assemble, image_with_gradients,
                            sample)
 from .render import render
@@ -52,6 +53,7 @@ class Settings:
     velocity: float = 0.5             # fraction of the last motion used to predict the next
     prior_weight: float = 0.01        # pull towards the prediction, relative to the data
     damping: float = 1e-3             # initial Levenberg-Marquardt damping
+    collision_weight: float = 5e5     # limb overlap penalty, per square metre
 
 
 @dataclass
@@ -144,6 +146,7 @@ class DifferentialTracker:
         self.calibrated = calibrated
         self.settings = settings or Settings()
         self.prims = body.primitives()
+        self.proxies = body_proxies(body)
         self.anchor_terms = None
 
     # -- parameter layout ---------------------------------------------------------------------
@@ -342,6 +345,16 @@ class DifferentialTracker:
                               scale_col=scale_cols[c])
             H += Hc
             g += gc
+        if self.settings.collision_weight > 0 and len(self.proxies.pairs):
+            # Limbs must not pass through each other (penalty on sphere-proxy overlaps).
+            seg2world, seg_jac = self.body.kinematics(state.pose(0))
+            r, J = penalty_system(self.proxies, seg2world, seg_jac)
+            if len(r):
+                w = self.settings.collision_weight
+                cols = np.concatenate([roots_cols[0], angle_cols])
+                H[np.ix_(cols, cols)] += w * J.T @ J
+                g[cols] += w * J.T @ r
+                cost += w * float(r @ r)
         return H, g, cost, accs
 
     def step(self, state_t, images_t, images_t1, previous=None, renders_t=None):

@@ -95,6 +95,8 @@ _ROOT_PARAMS = 6   # per frame: translation (3), rotation increment (3)
 _CAM_PARAMS = 6    # per scaled orthographic camera: log scale, rotation increment (3), shift (2)
 _MIN_VIEW_JOINTS = 4       # an uncalibrated view needs this many clicks to place its camera
 _MIN_FRAME_JOINTS = 6      # joints a frame needs in its best view to pose the body
+# A limb whose mirror image moves no joint more than this is not worth trying mirrored.
+_MIN_FLIP_M = 0.05
 # Above this many Jacobian entries the solver works on a sparse matrix (frames couple only
 # through the dimensions).
 _DENSE_LIMIT = 3_000_000
@@ -971,7 +973,10 @@ class _Fit:
                 n = normal(p)
                 target = X.copy()
                 rows = [JOINT_INDEX[j] for j in distal]
-                target[rows] -= 2.0 * ((X[rows] - p) @ n)[:, None] * n
+                shift = 2.0 * ((X[rows] - p) @ n)[:, None] * n
+                if np.abs(shift).max() < _MIN_FLIP_M:
+                    continue        # the limb lies in the image plane: its mirror is itself
+                target[rows] -= shift
                 moved = [k for k, name in enumerate(names)
                          if name.startswith((pivot + "_",) + tuple(j + "_" for j in distal))]
                 angles = state.angles[0].copy()
@@ -1009,10 +1014,9 @@ class _Fit:
     def _check_swaps(self, state, cost):
         """Find click pairs that look exchanged (left for right) in one view, §2.6's clicks.
 
-        A pair is a suspect when its two clicks lie far from the fit but each near the other's
-        projection, or, in a frame clicked in one view only (where a fit can bend to wrong
-        clicks), always. A suspect is confirmed when fitting with the pair exchanged lowers the
-        cost a lot; the fit then keeps the exchanged clicks and a warning names them.
+        A pair is a suspect when its two clicks lie off the fit and nearer the other's
+        projection. A suspect is confirmed when fitting with the pair exchanged lowers the cost
+        a lot; the fit then keeps the exchanged clicks and a warning names them.
         """
         err = self._errors(state)
         proj = self._projections(state)
@@ -1030,9 +1034,10 @@ class _Fit:
                     e_now = err[f, v, a] ** 2 + err[f, v, b] ** 2
                     p = proj[f, v]
                     e_swap = np.sum((p[a] - o[b]) ** 2) + np.sum((p[b] - o[a]) ** 2)
-                    suspect = (e_now > (2 * LOSS_SCALE_PX) ** 2 and e_swap < 0.3 * e_now) \
-                        or len(clicked_views) == 1
-                    if not suspect:
+                    # In a frame clicked in one view the fit bends towards wrong clicks, so there
+                    # a smaller misfit makes a suspect.
+                    floor = LOSS_SCALE_PX if len(clicked_views) == 1 else 2 * LOSS_SCALE_PX
+                    if e_now < 2 * floor ** 2 or e_swap > 0.5 * e_now:
                         continue
                     obs = self.obs.copy()
                     obs[f, v, [a, b]] = obs[f, v, [b, a]]
@@ -1288,17 +1293,26 @@ class _UncalibratedFit(_Fit):
         angles0 = kin.start_angles()
         Y = kin.forward(angles0[None], self.dims0)[0][0]
         first = views[0]
-        best = None
+        only = np.zeros_like(w)
+        only[0, first] = w[0, first]
+        free = np.zeros((1, len(self.views)), bool)
+        free[0, first] = True
+        # The camera alone for the body at rest, turned every 45 degrees, ranks the turns
+        # cheaply; the best few are then fitted with the angles.
+        trials = []
         for yaw in np.radians(np.arange(0, 360, 45)):
             cams = [None] * len(self.views)
             cams[first] = _ortho_camera(self.views[first], self.sizes[first], obs[0, first], Y,
                                         yaw)
             state = _State(self.dims0.copy(), 1.0, np.eye(4)[None], angles0[None].copy(), [cams])
-            only = np.zeros_like(w)
-            only[0, first] = w[0, first]
+            trials.append(_fit(kin, obs, only, state, free_root=False, free_angles=False,
+                               fit_dims=False, free_cams=free, calibrated=False,
+                               max_nfev=30)[:2])
+        trials.sort(key=lambda t: t[1])
+        best = None
+        for state, _ in trials[:3]:
             fitted, cost, _ = _fit(kin, obs, only, state, free_root=False, fit_dims=False,
-                                   free_cams=np.array([[c is not None for c in cams]]),
-                                   calibrated=False, max_nfev=60)
+                                   free_cams=free, calibrated=False, max_nfev=100)
             if best is None or cost < best[1]:
                 best = (fitted, cost)
         state = best[0]

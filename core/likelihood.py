@@ -3,16 +3,25 @@
 The appearance model is the previous image mapped onto the model at the previous estimate
 (eq. 2): the model is rendered at the estimate of frame t-1 and points on the visible limb
 surfaces keep their grey values from I(t-1), ``R_t = M(I_{t-1}, phi_{t-1})``. A particle moves
-those points rigidly with its limbs and projects them into I(t) (``M^-1(R_t, phi_t, x)``).
-Brightness constancy (eq. 3) says the two grey values agree up to noise, modelled as a Gaussian
-whose variance grows as the surface turns away from the camera (eq. 4) mixed with uniform
-outliers (eq. 10). Points hidden by nearer limbs, or seen edge-on, carry the constant
-``p_occluded`` instead (eq. 11); limbs and views multiply (eq. 12), i.e. log-likelihoods add.
+those points with its limbs and projects them into I(t) (``M^-1(R_t, phi_t, x)``). Brightness
+constancy (eq. 3) says the two grey values agree up to noise, modelled as a Gaussian whose
+variance grows as the surface turns away from the camera (eq. 4) mixed with uniform outliers
+(eq. 10). Points hidden by nearer limbs, or seen edge-on, carry the constant ``p_occluded``
+instead (eq. 11); limbs and views multiply (eq. 12), i.e. log-likelihoods add.
 
 Which surface points: ``n`` pixels are drawn uniformly, with replacement, from each limb's
-visible region in the render (§5); their 3D points and normals are stored in the limb's own
-coordinates, so every particle moves them rigidly with its limb. The paper projects a planar patch per limb instead (Fig. 2); projecting
-points keeps the true surface angle of each point for eq. (4) at the same cost.
+visible region in the render (§5), away from its rims. A point is kept from frame to frame while
+the estimate keeps seeing it, so its grey value can also remember earlier frames
+(``appearance_rate``, the "more persistent model of object appearance" the paper's §7 asks for).
+How a point moves with its limb (``surface``):
+
+- ``"attached"``: the point is fixed on the limb's surface (in segment coordinates), as texture
+  is, so turning a limb about its own axis turns the points with it;
+- ``"patch"``: the paper's planar approximation (Fig. 2): a primitive's appearance lives on
+  the half of its surface that faces the camera, parameterized by the position along the axis
+  and across the silhouette (a sphere's axis runs up the image); it follows the axis but not
+  the turn about it, so the twist of a straight limb is invisible, as in the paper's arm
+  example.
 
 Two refinements of the printed equations, both in the paper's spirit:
 
@@ -26,7 +35,9 @@ Images are grey, 0..255, smoothed by a Gaussian of standard deviation sqrt(2) (�
 
 Convention: world Z up, metres; cameras ``X_c = R @ X_w + t`` with OpenCV axes and pixels.
 ``seg2world`` arrays map each segment's reference-frame coordinates into the world (see
-:mod:`body`).
+:mod:`body`). A point is a basis vector of 6 numbers that a (3, 6) matrix per limb and particle
+maps into the camera frame: ``(x, y, z, 1, 0, 0)`` under ``cam_from_seg`` for attached points,
+``(1, s, w, h, s w, s h)`` under the patch matrix for patch points.
 """
 
 from dataclasses import dataclass
@@ -39,13 +50,15 @@ from .errors import ZoopraxisError
 from .plates import to_gray_float
 
 SMOOTHING_SIGMA = np.sqrt(2.0)
+SURFACES = ("attached", "patch")
 
 # Particles per vectorized batch: large enough to amortize the per-limb Python loop, small
 # enough that the (batch, points) temporaries stay in cache.
 _CHUNK = 2048
 
-# How far (metres) in front of an occluder's axis a limb's points may lie at the reference and
-# still be tested against it: a frame's motion in depth.
+# How far (metres) a point may lie off the rendered surface at the reference and still count
+# as seen there; and how far in front of an occluder's axis a limb's points may lie and still
+# be tested against it (a frame's motion in depth).
 _DEPTH_MARGIN = 0.03
 
 # cv2.remap takes maps of at most this many rows and columns.
@@ -54,6 +67,9 @@ _MAX_MAP = 32767
 # Surface angles beyond this are treated as this in eq. (4), so sigma stays finite; q = cos
 # alpha already makes such points nearly irrelevant.
 _MIN_COS = 0.1
+
+_BASIS = 6
+_ATTACHED = -1
 
 
 def prepare_image(image, smoothing=SMOOTHING_SIGMA):
@@ -78,79 +94,93 @@ def prepare_image(image, smoothing=SMOOTHING_SIGMA):
 
 @dataclass(frozen=True)
 class Occluders:
-    """Capsule approximations of the primitives, for per-point occlusion tests.
+    """Axes and cross-sections of the primitives: capsules for occlusion tests, and the
+    frames of the camera-facing patches.
 
     Attributes
     ----------
     segment : array of int, shape (O,)
+    kind : array of int, shape (O,)
+        ``render.CYLINDER`` or ``render.ELLIPSOID``.
     ends : array, shape (O, 2, 4)
-        The axis end points, homogeneous, in segment reference coordinates.
+        The axis end points, homogeneous, in segment reference coordinates (a cylinder's base
+        and top; an ellipsoid's capsule along its longest semi-axis).
     axes : array, shape (O, 2, 3)
         Cross-section axes (unit), segment reference coordinates.
     radii : array, shape (O, 2)
-        Cross-section radii along those axes (a cone frustum's mean radius).
+        Cross-section radii along those axes at the first end.
+    taper : array, shape (O,)
+        Radius at the second end over radius at the first (1 for ellipsoids).
     """
 
     segment: np.ndarray
+    kind: np.ndarray
     ends: np.ndarray
     axes: np.ndarray
     radii: np.ndarray
+    taper: np.ndarray
 
     @classmethod
     def from_primitives(cls, prims):
-        segment, ends, axes, radii = [], [], [], []
+        segment, ends, axes, radii, taper = [], [], [], [], []
         for p in range(len(prims)):
             T = prims.prim2seg[p]
             size = prims.size[p]
             if prims.kind[p] == render.CYLINDER:
-                mean = 0.5 * (1.0 + prims.taper[p])
                 a, b = T[:3, 3], T[:3, 3] + size[2] * T[:3, 2]
-                ax, r = T[:3, :2].T, size[:2] * mean
+                ax, r, tp = T[:3, :2].T, size[:2], prims.taper[p]
             else:
-                # An ellipsoid: a capsule along its longest semi-axis.
                 k = int(np.argmax(size))
                 others = [i for i in range(3) if i != k]
                 r = size[others]
                 half = max(size[k] - r.max(), 0.0)
                 a = T[:3, 3] - half * T[:3, k]
                 b = T[:3, 3] + half * T[:3, k]
-                ax = T[:3, others].T
+                ax, tp = T[:3, others].T, 1.0
             segment.append(prims.segment[p])
             ends.append(np.stack([np.append(a, 1.0), np.append(b, 1.0)]))
             axes.append(ax)
             radii.append(r)
-        return cls(np.array(segment, int), np.array(ends), np.array(axes), np.array(radii))
+            taper.append(tp)
+        return cls(np.array(segment, int), np.array(prims.kind, int), np.array(ends),
+                   np.array(axes), np.array(radii), np.array(taper, float))
 
 
 @dataclass
 class SurfacePoints:
-    """Where one view compares images: points on the visible limb surfaces at the reference.
+    """Where one view compares images: points on the limbs seen at the reference.
 
     Attributes
     ----------
-    segments : tuple of int
-        The segments with points, in order; ``slices[i]`` are segment ``segments[i]``'s points.
+    groups : tuple of (int, int)
+        ``(segment, primitive)`` of each group of points; primitive -1 for attached points.
     slices : tuple of slice
-    points : array of float32, shape (4, M)
-        Homogeneous points in their segment's reference coordinates.
-    normals : array of float32, shape (3, M)
-        Outward unit normals, same coordinates.
+        ``slices[i]`` are group i's points.
+    basis : array of float32, shape (6, M)
+        Each point's basis vector (see the module Convention).
+    normal_basis : array of float32, shape (6, M)
+        The same for the surface normal.
     values : array of float32, shape (M,)
-        Grey values of the points in the reference image: the appearance ``R_t``.
+        The appearance ``R_t``: each point's grey value.
     pairs : list of (int, array of int)
         ``(o, columns)``: the points ``columns`` are tested against occluder ``o``.
     """
 
-    segments: tuple
+    groups: tuple
     slices: tuple
-    points: np.ndarray
-    normals: np.ndarray
+    basis: np.ndarray
+    normal_basis: np.ndarray
     values: np.ndarray
     pairs: list
 
     @property
     def n_points(self):
-        return self.points.shape[1]
+        return self.basis.shape[1]
+
+    @property
+    def segments(self):
+        """Segment of every group."""
+        return tuple(k for k, _ in self.groups)
 
 
 @dataclass
@@ -173,6 +203,12 @@ class LikelihoodResult:
     compared: np.ndarray
 
 
+def _empty_pool():
+    return {"segment": np.zeros(0, int), "prim": np.zeros(0, int),
+            "basis": np.zeros((0, _BASIS)), "normal_basis": np.zeros((0, _BASIS)),
+            "value": np.zeros(0, np.float32), "missed": np.zeros(0, int)}
+
+
 class ImageLikelihood:
     """Robust grey-value likelihood of articulated poses in calibrated views (§5).
 
@@ -191,10 +227,11 @@ class ImageLikelihood:
         (a pose does not gain by hiding its limbs) and above an outlier (a limb that truly
         disappears behind another is not punished as a mismatch).
     n_points : int
-        Pixels drawn per limb and view (with replacement, §5).
+        Points per limb and view (drawn with replacement, §5).
     beta : float
-        Exponent on the likelihood (1 = the paper's). Fewer effective measurements (< 1)
-        flatten the posterior when many particles should survive a frame.
+        Exponent on the likelihood (1 = the paper's).
+    surface : {"attached", "patch"}
+        How points move with their limb (see the module docstring).
     min_pixels : int
         Limbs showing fewer pixels at the reference are left out of that view.
     min_cos : float
@@ -215,9 +252,9 @@ class ImageLikelihood:
         Seed of the pixel draws.
     """
 
-    def __init__(self, body, cameras, *, sigma_image=8.0, epsilon=0.1, p_occluded=None,
-                 n_points=40, beta=1.0, min_pixels=12, min_cos=0.2, appearance_rate=1.0,
-                 keep_frames=4, occlusion_margin=12.0, seed=0):
+    def __init__(self, body, cameras, *, sigma_image=4.0, epsilon=0.1, p_occluded=None,
+                 n_points=40, beta=1.0, surface="attached", min_pixels=12, min_cos=0.2,
+                 appearance_rate=0.5, keep_frames=4, occlusion_margin=12.0, seed=0):
         if not cameras:
             raise ZoopraxisError("ImageLikelihood: no cameras given")
         for cam in cameras:
@@ -230,6 +267,12 @@ class ImageLikelihood:
         if n_points * body.n_segments >= _MAX_MAP:
             raise ZoopraxisError(f"ImageLikelihood: n_points={n_points} per limb is too many "
                                  f"(at most {(_MAX_MAP - 1) // body.n_segments})")
+        if surface not in SURFACES:
+            raise ZoopraxisError(f"ImageLikelihood: surface must be one of "
+                                 f"{', '.join(SURFACES)}, got {surface!r}")
+        if not 0 < appearance_rate <= 1:
+            raise ZoopraxisError(f"ImageLikelihood: appearance_rate must be in (0, 1], got "
+                                 f"{appearance_rate}")
         self.body = body
         self.cameras = list(cameras)
         self.prims = body.primitives()
@@ -239,26 +282,24 @@ class ImageLikelihood:
         self.p_occluded = 1.0 / 256.0 if p_occluded is None else float(p_occluded)
         self.n_points = int(n_points)
         self.beta = float(beta)
+        self.surface = surface
         self.min_pixels = int(min_pixels)
         self.min_cos = float(min_cos)
-        if not 0 < appearance_rate <= 1:
-            raise ZoopraxisError(f"ImageLikelihood: appearance_rate must be in (0, 1], got "
-                                 f"{appearance_rate}")
         self.appearance_rate = float(appearance_rate)
         self.keep_frames = int(keep_frames)
-        self._pools = None
         self.occlusion_margin = float(occlusion_margin)
         self.rng = np.random.default_rng(seed)
+        self._pools = None
         self.surfaces = None
 
-    # -- where to look ----------------------------------------------------------------------
+    # -- the appearance: where to look and what to expect -----------------------------------
 
     def set_reference(self, seg2world, images):
         """Map the previous images onto the model at the previous estimate (eq. 2).
 
         Points already on the limbs whose render at the reference shows them (in view, facing
         the camera, not hidden) take their grey value from I(t-1), blended into their old value
-        by ``appearance_rate``; points hidden for more than ``keep_frames`` references are
+        by ``appearance_rate``; points unseen for more than ``keep_frames`` references are
         dropped, and every visible limb is topped up to ``n_points`` fresh points drawn from
         its visible pixels. Only the points seen at the reference are compared.
 
@@ -274,7 +315,7 @@ class ImageLikelihood:
                                  f"{len(images)} images")
         seg2world = np.asarray(seg2world, float)
         if self._pools is None:
-            self._pools = [None] * len(self.cameras)
+            self._pools = [_empty_pool() for _ in self.cameras]
         self.surfaces = []
         for v, (cam, image) in enumerate(zip(self.cameras, images)):
             self._pools[v], surf = self._update_pool(cam, seg2world,
@@ -283,7 +324,7 @@ class ImageLikelihood:
             self.surfaces.append(surf)
 
     def reset(self):
-        """Forget the appearance (start again from the next reference)."""
+        """Forget the appearance (a new track starts from the next reference)."""
         self._pools = None
         self.surfaces = None
 
@@ -295,31 +336,22 @@ class ImageLikelihood:
         return image
 
     def _update_pool(self, cam, seg2world, image, pool):
-        """Refresh one view's pool of surface points at the reference; returns the pool and the
+        """Refresh one view's pool of points at the reference; return the pool and the
         :class:`SurfacePoints` of the points seen there."""
         res = render.render(cam, seg2world, self.prims, want=("point", "normal"))
         H, W = image.shape
-        world2seg = np.linalg.inv(seg2world)
-        if pool is None:
-            pool = {"segment": np.zeros(0, int), "point": np.zeros((0, 3)),
-                    "normal": np.zeros((0, 3)), "value": np.zeros(0, np.float32),
-                    "missed": np.zeros(0, int)}
         seen = np.zeros(0, bool)
         if len(pool["segment"]):
-            T = seg2world[pool["segment"]]
-            X = np.einsum("pij,pj->pi", T[:, :3, :3], pool["point"]) + T[:, :3, 3]
-            n = np.einsum("pij,pj->pi", T[:, :3, :3], pool["normal"])
-            uv = cam.project(X)
-            z = cam.depth(X)
-            col, row = np.rint(uv[:, 0]).astype(int), np.rint(uv[:, 1]).astype(int)
+            g = self._project(cam, seg2world[None], self._as_surface(pool), normals=True)
+            u, v, z, cos = g["u"][0], g["v"][0], g["z"][0], g["cos"][0]
+            col, row = np.rint(u), np.rint(v)
             inside = (col >= 0) & (col < W) & (row >= 0) & (row < H) & (z > 0)
-            col, row = np.where(inside, col, 0), np.where(inside, row, 0)
+            col = np.where(inside, col, 0).astype(int)
+            row = np.where(inside, row, 0).astype(int)
             seen = inside & (res.label[row, col] == pool["segment"]) \
-                & (np.abs(res.depth[row, col] - z) < _DEPTH_MARGIN) \
-                & (self._facing(cam, X, n) > self.min_cos)
+                & (np.abs(res.depth[row, col] - z) < _DEPTH_MARGIN) & (cos > self.min_cos)
             if seen.any():
-                now = cv2.remap(image, uv[seen, 0].astype(np.float32)[None],
-                                uv[seen, 1].astype(np.float32)[None], cv2.INTER_LINEAR,
+                now = cv2.remap(image, u[seen][None], v[seen][None], cv2.INTER_LINEAR,
                                 borderMode=cv2.BORDER_REPLICATE)[0]
                 a = np.float32(self.appearance_rate)
                 pool["value"][seen] = (1 - a) * pool["value"][seen] + a * now
@@ -327,71 +359,99 @@ class ImageLikelihood:
             keep = pool["missed"] <= self.keep_frames
             pool = {k: v[keep] for k, v in pool.items()}
             seen = seen[keep]
-        # Top every visible limb up with fresh points from its visible, camera-facing pixels.
-        labels = res.label.ravel()
-        points = res.point.reshape(-1, 3).astype(float)
-        normals = res.normal.reshape(-1, 3).astype(float)
-        facing = self._facing(cam, points, normals) > self.min_cos
-        grey = image.ravel()
-        counts = np.bincount(pool["segment"], minlength=self.body.n_segments)
-        fresh = {k: [] for k in pool}
-        for k in range(self.body.n_segments):
-            missing = self.n_points - counts[k]
-            if missing <= 0:
-                continue
-            pixels = np.flatnonzero((labels == k) & facing)
-            if pixels.size < self.min_pixels:
-                continue
-            pick = pixels[self.rng.integers(0, pixels.size, missing)]
-            R, t = world2seg[k, :3, :3], world2seg[k, :3, 3]
-            fresh["segment"].append(np.full(missing, k))
-            fresh["point"].append(points[pick] @ R.T + t)
-            fresh["normal"].append(normals[pick] @ R.T)
-            fresh["value"].append(grey[pick])
-            fresh["missed"].append(np.zeros(missing, int))
-        if fresh["segment"]:
-            pool = {k: np.concatenate([pool[k]] + fresh[k]) for k in pool}
-            seen = np.concatenate([seen, np.ones(len(pool["segment"]) - len(seen), bool)])
-        order = np.argsort(pool["segment"], kind="stable")
+        fresh = self._fresh_points(cam, seg2world, image, res, pool)
+        if len(fresh["segment"]):
+            pool = {k: np.concatenate([pool[k], fresh[k]]) for k in pool}
+            seen = np.concatenate([seen, np.ones(len(fresh["segment"]), bool)])
+        order = np.lexsort((pool["prim"], pool["segment"]))
         pool = {k: v[order] for k, v in pool.items()}
         seen = seen[order]
-        return pool, self._surface_points(cam, seg2world, pool, seen)
-
-    @staticmethod
-    def _facing(cam, X, normals):
-        """``cos(alpha)`` of surface points (N, 3) with unit normals (N, 3), world frame."""
-        sight = X - cam.center
-        return -np.sum(normals * sight, axis=1) / np.linalg.norm(sight, axis=1)
-
-    def _surface_points(self, cam, seg2world, pool, seen):
-        segment = pool["segment"][seen]
-        if segment.size == 0:
-            return SurfacePoints((), (), np.zeros((4, 0), np.float32),
-                                 np.zeros((3, 0), np.float32), np.zeros(0, np.float32), [])
-        segments, starts = np.unique(segment, return_index=True)
-        ends = np.append(starts[1:], segment.size)
-        P = pool["point"][seen]
-        surf = SurfacePoints(
-            tuple(int(k) for k in segments),
-            tuple(slice(int(a), int(b)) for a, b in zip(starts, ends)),
-            np.vstack([P.T, np.ones(len(P))]).astype(np.float32),
-            pool["normal"][seen].T.astype(np.float32), pool["value"][seen].astype(np.float32),
-            [])
+        surf = self._as_surface({k: v[seen] for k, v in pool.items()})
         surf.pairs = self._pairs(cam, seg2world, surf)
         # Points the capsule test calls hidden although the z-buffer saw them lie where the
         # capsules are a poor fit; leave them out so the test agrees with the render here.
-        geometry = self._project(cam, seg2world[None], surf, normals=False)
-        hidden = self._occluded(cam, surf, geometry)[0]
+        hidden = self._occluded(cam, surf, self._project(cam, seg2world[None], surf,
+                                                         normals=False))[0]
         if hidden.any():
             surf = self._subset(surf, ~hidden)
-        return surf
+        return pool, surf
+
+    def _fresh_points(self, cam, seg2world, image, res, pool):
+        """New points for every visible limb with fewer than ``n_points`` in the pool."""
+        labels = res.label.ravel()
+        prim_of = res.prim.ravel()
+        points = res.point.reshape(-1, 3).astype(float)
+        normals = res.normal.reshape(-1, 3).astype(float)
+        sight = points - cam.center
+        facing = -np.sum(normals * sight, axis=1) > self.min_cos * np.linalg.norm(sight, axis=1)
+        grey = image.ravel()
+        world2seg = np.linalg.inv(seg2world)
+        counts = np.bincount(pool["segment"], minlength=self.body.n_segments)
+        C = self._cam_from_seg(cam, seg2world[None]).astype(float)
+        fresh = {k: [] for k in pool}
+        for k in range(self.body.n_segments):
+            missing = self.n_points - counts[k]
+            pixels = np.flatnonzero((labels == k) & facing)
+            if missing <= 0 or pixels.size < self.min_pixels:
+                continue
+            pick = pixels[self.rng.integers(0, pixels.size, missing)]
+            prim = prim_of[pick].astype(int)
+            if self.surface != "patch":
+                prim = np.full(missing, _ATTACHED)
+            basis = np.zeros((missing, _BASIS))
+            normal_basis = np.zeros((missing, _BASIS))
+            R, t = world2seg[k, :3, :3], world2seg[k, :3, 3]
+            basis[:, :3] = points[pick] @ R.T + t
+            basis[:, 3] = 1.0
+            normal_basis[:, :3] = normals[pick] @ R.T
+            for p in np.unique(prim[prim >= 0]):
+                sel = prim == p
+                basis[sel] = self._patch_coordinates(C, p, points[pick[sel]] @ cam.R.T + cam.t)
+                normal_basis[sel] = basis[sel]
+            fresh["segment"].append(np.full(missing, k))
+            fresh["prim"].append(prim)
+            fresh["basis"].append(basis)
+            fresh["normal_basis"].append(normal_basis)
+            fresh["value"].append(grey[pick].astype(np.float32))
+            fresh["missed"].append(np.zeros(missing, int))
+        if not fresh["segment"]:
+            return _empty_pool()
+        return {k: np.concatenate(v) for k, v in fresh.items()}
+
+    def _patch_coordinates(self, cam_from_seg, p, X_cam):
+        """Patch basis ``(1, s, w, h, s w, s h)`` of camera-frame points on primitive ``p``."""
+        M, _ = self._patch_matrices(cam_from_seg, p)
+        M = M[0].astype(float)
+        a, d, across, toward, taper_a = M[:, 0], M[:, 1], M[:, 2], M[:, 3], M[:, 4]
+        s = np.clip((X_cam - a) @ d / (d @ d), 0.0, 1.0)
+        # taper_a = (taper - 1) * across, so the radius at s is (1 + (taper - 1) s) times.
+        scale = 1.0 + s * (taper_a @ across) / (across @ across)
+        off = X_cam - a - s[:, None] * d
+        w = np.clip(off @ across / (across @ across) / scale, -1.0, 1.0)
+        h = np.sqrt(1.0 - w * w)
+        return np.stack([np.ones_like(s), s, w, h, s * w, s * h], axis=1)
+
+    def _as_surface(self, pool):
+        """SurfacePoints of a pool (sorted by segment and primitive), without pairs."""
+        keys = np.stack([pool["segment"], pool["prim"]], axis=1)
+        if len(keys) == 0:
+            return SurfacePoints((), (), np.zeros((_BASIS, 0), np.float32),
+                                 np.zeros((_BASIS, 0), np.float32), np.zeros(0, np.float32), [])
+        change = np.flatnonzero(np.any(keys[1:] != keys[:-1], axis=1)) + 1
+        starts = np.concatenate([[0], change])
+        ends = np.append(change, len(keys))
+        return SurfacePoints(
+            tuple((int(keys[a, 0]), int(keys[a, 1])) for a in starts),
+            tuple(slice(int(a), int(b)) for a, b in zip(starts, ends)),
+            pool["basis"].T.astype(np.float32), pool["normal_basis"].T.astype(np.float32),
+            pool["value"].astype(np.float32), [])
 
     def _subset(self, surf, keep):
-        segments, slices, start = [], [], 0
-        for k, sl in zip(surf.segments, surf.slices):
+        groups, slices, start = [], [], 0
+        for g, sl in zip(surf.groups, surf.slices):
             count = int(keep[sl].sum())
             if count:
-                segments.append(k)
+                groups.append(g)
                 slices.append(slice(start, start + count))
                 start += count
         renumber = np.cumsum(keep) - 1
@@ -400,32 +460,32 @@ class ImageLikelihood:
             cols = renumber[cols[keep[cols]]]
             if cols.size:
                 pairs.append((o, cols))
-        return SurfacePoints(tuple(segments), tuple(slices), surf.points[:, keep],
-                             surf.normals[:, keep], surf.values[keep], pairs)
+        return SurfacePoints(tuple(groups), tuple(slices), surf.basis[:, keep],
+                             surf.normal_basis[:, keep], surf.values[keep], pairs)
 
     def _pairs(self, cam, seg2world, surf):
-        """(limb, occluder) pairs whose occlusion can change near the reference.
+        """(occluder, points) pairs whose occlusion can change near the reference.
 
-        A pair is kept if some point of the limb lies within ``occlusion_margin`` pixels of
-        the occluder's silhouette and behind (or within ``_DEPTH_MARGIN`` in front of) its
-        axis at the reference; particles stay near the reference, so other pairs cannot
-        occlude.
+        A point is tested against an occluder of another segment if it lies within
+        ``occlusion_margin`` pixels of the occluder's silhouette and behind (or within
+        ``_DEPTH_MARGIN`` in front of) its axis at the reference; particles stay near the
+        reference, so other points cannot be hidden by it.
         """
         occ = self.occluders
-        geometry = self._project(cam, seg2world[None], surf, normals=False)
-        u, v, z = geometry["u"], geometry["v"], geometry["z"]
+        g = self._project(cam, seg2world[None], surf, normals=False)
+        u, v, z = g["u"], g["v"], g["z"]
+        segment = np.zeros(surf.n_points, int)
+        for (k, _), sl in zip(surf.groups, surf.slices):
+            segment[sl] = k
         pairs = []
         for o in range(len(occ.segment)):
-            capsule = self._capsule(cam, geometry["cam_from_seg"], o)
-            for i, (k, sl) in enumerate(zip(surf.segments, surf.slices)):
-                if occ.segment[o] == k:
-                    continue
-                dist2, radius, z_axis = self._capsule_distance(capsule, u[:, sl], v[:, sl])
-                near = np.sqrt(dist2) - radius < self.occlusion_margin
-                behind = z[:, sl] > z_axis - _DEPTH_MARGIN
-                cols = np.flatnonzero(near[0] & behind[0])
-                if cols.size:
-                    pairs.append((o, cols + sl.start))
+            dist2, radius, z_axis = self._capsule_distance(
+                self._capsule(cam, g["cam_from_seg"], o), u, v)
+            near = (np.sqrt(dist2) - radius < self.occlusion_margin) \
+                & (z > z_axis - _DEPTH_MARGIN)
+            cols = np.flatnonzero(near[0] & (segment != occ.segment[o]))
+            if cols.size:
+                pairs.append((o, cols))
         return pairs
 
     # -- the geometry of many particles -----------------------------------------------------
@@ -435,6 +495,63 @@ class ImageLikelihood:
         """``cam_from_seg`` (N, S, 3, 4) in float32 for a batch of particles."""
         Rt = np.hstack([cam.R, cam.t[:, None]])
         return (Rt @ seg2world).astype(np.float32)
+
+    def _patch_matrices(self, cam_from_seg, p):
+        """Camera-frame matrices (N, 3, 6) taking patch bases to points and to normals.
+
+        The patch of primitive ``p`` is its half facing the camera, as if it were a cylinder
+        along its capsule axis (:class:`Occluders`): ``X = a + s d + r(s) (w
+        e_across + h e_toward)`` with ``a`` the base centre, ``d`` the axis, ``e_across``
+        perpendicular to the axis and the line of sight, ``e_toward`` perpendicular to the
+        axis towards the camera, and ``r(s)`` the cross-section's extent in those directions
+        (an elliptic section seen from its side is narrower than from its face), growing
+        linearly with the taper.
+        """
+        occ = self.occluders
+        C = cam_from_seg[:, occ.segment[p]]                                   # (N, 3, 4)
+        E = C @ occ.ends[p].T.astype(np.float32)                              # (N, 3, 2)
+        a, d = E[:, :, 0], E[:, :, 1] - E[:, :, 0]
+        if not np.any(occ.ends[p, 0] != occ.ends[p, 1]):
+            # A sphere has no axis: take the one up the image, through its centre.
+            length = 2.0 * np.float32(occ.radii[p].max())
+            up = np.cross(a, np.array([1.0, 0.0, 0.0], np.float32))
+            d = -length * up / np.linalg.norm(up, axis=1, keepdims=True)
+            a = a - 0.5 * d
+        mid = a + 0.5 * d
+        dn = d / np.linalg.norm(d, axis=1, keepdims=True)
+        across = np.cross(dn, mid)
+        across /= np.maximum(np.linalg.norm(across, axis=1, keepdims=True), 1e-9)
+        toward = np.cross(dn, across)
+        sec = C[:, :, :3] @ occ.axes[p].T.astype(np.float32)                  # (N, 3, 2)
+        dx = np.sum(mid * sec[:, :, 0], axis=1)
+        dy = np.sum(mid * sec[:, :, 1], axis=1)
+        rx, ry = occ.radii[p]
+        dd = np.maximum(dx * dx + dy * dy, 1e-12)
+        r_across = np.sqrt((rx * rx * dy * dy + ry * ry * dx * dx) / dd)[:, None]
+        r_toward = np.sqrt((rx * rx * dx * dx + ry * ry * dy * dy) / dd)[:, None]
+        grow = np.float32(occ.taper[p] - 1.0)
+        A, T = r_across * across, r_toward * toward
+        M = np.stack([a, d, A, T, grow * A, grow * T], axis=2).astype(np.float32)
+        zero = np.zeros_like(a)
+        Nm = np.stack([zero, zero, across, toward, zero, zero], axis=2).astype(np.float32)
+        return M, Nm
+
+    def _group_matrices(self, C, surf, normals):
+        """Per group, the (N, 3, 6) matrices for points and (if wanted) normals."""
+        out = []
+        for k, p in surf.groups:
+            if p == _ATTACHED:
+                M = np.zeros(C.shape[:1] + (3, _BASIS), np.float32)
+                M[:, :, :4] = C[:, k]
+                Nm = None
+                if normals:
+                    Nm = np.zeros_like(M)
+                    Nm[:, :, :3] = C[:, k, :, :3]
+                out.append((M, Nm))
+            else:
+                M, Nm = self._patch_matrices(C, p)
+                out.append((M, Nm if normals else None))
+        return out
 
     def _project(self, cam, seg2world, surf, normals=True):
         """Camera depths, pixels and surface angles of the points for every particle.
@@ -452,15 +569,13 @@ class ImageLikelihood:
         x, y, z = (np.empty((N, M), np.float32) for _ in range(3))
         if normals:
             nx, ny, nz = (np.empty((N, M), np.float32) for _ in range(3))
-        for k, sl in zip(surf.segments, surf.slices):
-            # Row r of cam_from_seg times the points: an (N, 4) @ (4, m) product per row.
-            Ck = C[:, k]
-            P = surf.points[:, sl]
-            x[:, sl], y[:, sl], z[:, sl] = Ck[:, 0] @ P, Ck[:, 1] @ P, Ck[:, 2] @ P
+        for (P, Pn), sl in zip(self._group_matrices(C, surf, normals), surf.slices):
+            # Row r of the group's matrix times the bases: an (N, 6) @ (6, m) product per row.
+            b = surf.basis[:, sl]
+            x[:, sl], y[:, sl], z[:, sl] = P[:, 0] @ b, P[:, 1] @ b, P[:, 2] @ b
             if normals:
-                n = surf.normals[:, sl]
-                nx[:, sl], ny[:, sl], nz[:, sl] = (Ck[:, 0, :3] @ n, Ck[:, 1, :3] @ n,
-                                                   Ck[:, 2, :3] @ n)
+                n = surf.normal_basis[:, sl]
+                nx[:, sl], ny[:, sl], nz[:, sl] = Pn[:, 0] @ n, Pn[:, 1] @ n, Pn[:, 2] @ n
         cos = -(nx * x + ny * y + nz * z) / np.sqrt(x * x + y * y + z * z) if normals else None
         if cam.has_distortion:
             X = np.stack([x, y, z], axis=-1).astype(float)
@@ -476,7 +591,7 @@ class ImageLikelihood:
         return {"cam_from_seg": C, "z": z, "u": u, "v": v, "cos": cos}
 
     def _capsule(self, cam, cam_from_seg, o):
-        """Image geometry of occluder ``o`` for a batch of poses, each array (N,).
+        """Image geometry of occluder ``o`` for a batch of poses, each array (N, 1).
 
         Returns ``(ax, ay, bx, by, inv_len2, za, dz, fw)``: the projected axis start and the
         vector to its end (pixels), the inverse squared length of that vector, the camera depth
@@ -497,7 +612,7 @@ class ImageLikelihood:
         axes = Co[:, :, :3] @ occ.axes[o].T.astype(np.float32)                # (N, 3, 2)
         dx = np.sum(view * axes[:, :, 0], axis=1)
         dy = np.sum(view * axes[:, :, 1], axis=1)
-        rx, ry = occ.radii[o]
+        rx, ry = occ.radii[o] * 0.5 * (1.0 + occ.taper[o])
         dd = dx * dx + dy * dy
         along = dd <= 1e-6 * np.sum(view * view, axis=1)
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -524,11 +639,9 @@ class ImageLikelihood:
         C = geometry["cam_from_seg"]
         hidden = np.zeros(geometry["z"].shape, bool)
         u, v, z = geometry["u"], geometry["v"], geometry["z"]
-        capsules = {}
         for o, cols in surf.pairs:
-            if o not in capsules:
-                capsules[o] = self._capsule(cam, C, o)
-            dist2, radius, z_axis = self._capsule_distance(capsules[o], u[:, cols], v[:, cols])
+            dist2, radius, z_axis = self._capsule_distance(self._capsule(cam, C, o),
+                                                           u[:, cols], v[:, cols])
             hidden[:, cols] |= (dist2 < radius * radius) & (z[:, cols] > z_axis)
         return hidden
 
@@ -622,4 +735,4 @@ class ImageLikelihood:
 
 
 __all__ = ["ImageLikelihood", "LikelihoodResult", "SurfacePoints", "Occluders",
-           "prepare_image", "SMOOTHING_SIGMA"]
+           "prepare_image", "SMOOTHING_SIGMA", "SURFACES"]

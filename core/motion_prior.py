@@ -769,8 +769,8 @@ class WalkingPrior:
         Angular-velocity noise of the heading per frame (radians); 0 holds the heading fixed.
     """
 
-    def __init__(self, body, model=None, *, fps=_REFERENCE_FPS, eps=0.1, sigma_phase=0.01,
-                 sigma_rate=0.002, sigma_path=0.01, sigma_turn=(0.0, 0.0, 0.005)):
+    def __init__(self, body, model=None, *, fps=_REFERENCE_FPS, eps=0.1, sigma_phase=0.005,
+                 sigma_rate=0.0002, sigma_path=0.01, sigma_turn=(0.0, 0.0, 0.005)):
         self.body = body
         self.model = WalkModel.load() if model is None else model
         self.fps = float(fps)

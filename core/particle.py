@@ -285,7 +285,7 @@ class ParticleFilter:
     """
 
     def __init__(self, body, cameras, prior, *, n_particles=1000, seed=0, likelihood=None,
-                 appearance="estimate", min_ess=0.05, lost_inliers=0.3,
+                 appearance="estimate", min_ess=0.1, lost_inliers=0.3,
                  uncertain_spread=0.08, **likelihood_options):
         if int(n_particles) != n_particles or n_particles < 1:
             raise ZoopraxisError(f"ParticleFilter: n_particles must be a positive whole number, "

@@ -354,6 +354,11 @@ def _make_result(body, views, plates, factors, states, reports, calibrated, init
                 iou[i, c] = rep.iou[c]
                 if rep.coverage is not None:
                     fit[i, c] = rep.coverage[c]
+    from .collision import body_proxies, penetration
+
+    proxies = body_proxies(body)
+    overlap = np.array([penetration(proxies, body.seg2world(Pose(roots[i], angles[i]))).max()
+                        if len(proxies.pairs) else 0.0 for i in range(F)])
     status = []
     res_all = np.array([[residual[v][i] for v in views] for i in range(F)])
     med = np.median(res_all[res_all > 0]) if np.any(res_all > 0) else 1.0
@@ -378,6 +383,7 @@ def _make_result(body, views, plates, factors, states, reports, calibrated, init
              "silhouette_iou": np.round(np.nan_to_num(iou, nan=-1.0), 4).tolist(),
              "silhouette_fit": np.round(np.nan_to_num(fit, nan=-1.0), 4).tolist(),
              "cancelled": cancelled,
+             "limb_overlap_mm": np.round(1000 * overlap, 2).tolist(),
              "warnings": list(init.warnings)}
     return TrackResult(mode="calibrated" if calibrated else "uncalibrated", fps=float(fps),
                        frames=np.array(order), joints3d=joints3d, joints2d=joints2d,
