@@ -85,8 +85,11 @@ def main(argv):
 
             result = track(opened, anchors, cameras, **kwargs)
         else:
-            from . import hybrid
-
+            try:
+                from . import hybrid
+            except ImportError:
+                raise ZoopraxisError(f"--tracker {args.tracker} is not available in this "
+                                     "version; use --tracker differential") from None
             result = hybrid.track(opened, anchors, cameras, tracker=args.tracker,
                                   particles=args.particles, seed=args.seed, **kwargs)
     write_result(out, result, force=args.force)
