@@ -49,6 +49,7 @@ class Settings:
     silhouette_weight: float = 0.002  # signed-distance term (per pixel^2, relative to grey^2)
     silhouette_scale: float = 3.0     # robust scale of silhouette residuals, pixels
     silhouette_margin: float = 1.0    # contour may stray this far outside the silhouette, px
+                                      # (negative: two-sided, the contour on the boundary)
     em: bool = True                   # EM refinement of the support maps
     velocity: float = 0.5             # fraction of the last motion used to predict the next
     prior_weight: float = 0.01        # pull towards the prediction, relative to the data
@@ -272,7 +273,8 @@ class DifferentialTracker:
             ref = se3.apply(se3.invert(T)[seg], X)
             terms.append(Term(c, seg, ref, np.zeros(len(seg)), np.ones(len(seg)),
                               self.settings.silhouette_scale / 2 ** level, "silhouette",
-                              hinge=self.settings.silhouette_margin / 2 ** level))
+                              hinge=None if self.settings.silhouette_margin < 0
+                              else self.settings.silhouette_margin / 2 ** level))
         return terms
 
     def set_anchor(self, state, images, renders):

@@ -309,6 +309,11 @@ class Scene:
         return np.clip(img * 255.0 + 0.5, 0, 255).astype(np.uint8), res.label
 
 
+def _inside(uv, width, height, margin):
+    m = margin * np.array([width, height])
+    return bool(np.all(uv >= m) and np.all(uv <= np.array([width, height]) - 1 - m))
+
+
 def make_scene(joints, joint_frames, *, views=3, image_size=(480, 360), build="average",
                noise=0.0, clutter=0, seed=2345, radius=None, camera_height=1.3, focal_px=None,
                start_angle=None):
@@ -328,18 +333,25 @@ def make_scene(joints, joint_frames, *, views=3, image_size=(480, 360), build="a
     body_h = hi[2] - lo[2] + 0.25
     if focal_px is None:
         focal_px = 1.1 * max(width, height)
-    if radius is None:
-        # far enough that the body height and the path both fit with a margin
-        need_v = body_h / (0.80 * height / focal_px)
-        need_h = (extent + 0.8) / (0.85 * width / focal_px)
-        radius = max(need_v, need_h, 2.5) + extent / 2
     if start_angle is None:
         # look at the walk from the side for a single view, then spread around
         path = joints[-1, JOINT_INDEX["pelvis"], :2] - joints[0, JOINT_INDEX["pelvis"], :2]
         heading = np.arctan2(path[1], path[0]) if np.linalg.norm(path) > 0.2 else 0.0
         start_angle = heading - np.pi / 2 + 0.35
-    cams = ring_of_cameras(views, radius, camera_height, target, (width, height), focal_px,
-                           start_angle=start_angle)
+    if radius is None:
+        # The nearest ring at which every joint of every frame stays inside every view with a
+        # margin: the body as large as the motion allows.
+        pts = joints.reshape(-1, 3)[::7]
+        conservative = max(body_h / (0.80 * height / focal_px),
+                           (extent + 0.8) / (0.85 * width / focal_px), 2.5) + extent / 2
+        radius = conservative
+        for r in np.arange(1.8, conservative, 0.1):
+            cams = ring_of_cameras(views, r, camera_height, target, (width, height), focal_px,
+                                   start_angle=start_angle)
+            if all(np.all(c.depth(pts) > 0.5) and _inside(c.project(pts), width, height, 0.06)
+                   for c in cams):
+                radius = r
+                break
     rng = np.random.default_rng(seed + 17)
     backgrounds = [_background(rng, width, height, clutter) for _ in cams]
     body = synth_body(joints, joint_frames, build)
