@@ -8,7 +8,9 @@ Sidenbladh, Black & Fleet (2000) §6 give two priors ``p(phi_t | phi_{t-1}, V_{t
   (their arm example: three shoulder angles and the elbow), the rest stay fixed.
 - :class:`WalkingPrior` (§6.2, eqs. 13-17): joint angles follow a walking cycle, the mean plus a
   few eigencurves learned by PCA from motion capture (:class:`WalkModel`), parameterized by a
-  phase and the eigen-coefficients; the torso moves forward at the learned speed.
+  phase and the eigen-coefficients; the torso moves forward at the learned speed. The model
+  ships as ``data/walk_prior.npz`` (about 60 kB), learned from the CMU walks 131_01-03 by
+  ``tools/learn_walk_prior.py``, which rebuilds it.
 
 Both share one interface, used by :mod:`particle`::
 
@@ -99,7 +101,7 @@ def root_from_joints(joints):
     return se3.transform(np.column_stack([x, np.cross(z, x), z]), J[JOINT_INDEX["pelvis"]])
 
 
-def fit_pose(body, joints, pose=None, *, weights=None, prior_weight=1e-3, iterations=40,
+def fit_pose(body, joints, pose=None, *, weights=None, prior_weight=1e-5, iterations=60,
              tol=1e-8):
     """Least-squares fit of a pose to 3D standard joints (Levenberg-Marquardt).
 
@@ -178,22 +180,30 @@ def fit_pose(body, joints, pose=None, *, weights=None, prior_weight=1e-3, iterat
     return pose, rms
 
 
-def fit_body(body, joints, *, rounds=3, dims=None, ridge=1e-2, prior_weight=1e-3):
+def fit_body(body, joints, *, iterations=20, dims=None, ridge=1e-4, prior_weight=1e-5):
     """Fit body lengths and per-frame poses to a sequence of 3D standard joints.
 
-    Alternates per-frame pose fits (:func:`fit_pose`, each frame starting from the previous)
-    with a linear least-squares fit of the lengths: at fixed angles the joints are linear in the
-    lengths (``body.joints_dims_jacobian``), so the lengths of all frames solve one small
-    system; a ridge towards the current lengths keeps lengths no joint measures where they are.
+    Every frame's pose starts from :func:`fit_pose` (each frame from the previous one); then
+    Gauss-Newton steps refine the lengths and all poses together. At fixed angles the joints
+    are linear in the lengths (``body.joints_dims_jacobian``), and each pose only touches its
+    own frame, so the normal equations are block-diagonal in the poses: the shared lengths
+    are solved on their Schur complement, then each pose on its own block. A ridge towards
+    the starting lengths keeps lengths no joint measures (a template's spine) where they are;
+    a length driven below a fifth of its start is held there.
 
     Parameters
     ----------
     body : BodyModel
     joints : array, shape (F, 17, 3)
-    rounds : int
-        Pose / length alternations.
+        NaN rows (unknown joints) are ignored.
+    iterations : int
+        Gauss-Newton steps over lengths and poses together.
     dims : sequence of str, optional
         Length names to fit; default all of ``body.LENGTH_DIMS``.
+    ridge : float
+        Weight of the pull towards the starting lengths, per frame (m^2 per m^2).
+    prior_weight : float
+        Pull of the angles towards their starting values (see :func:`fit_pose`).
 
     Returns
     -------
@@ -207,30 +217,67 @@ def fit_body(body, joints, *, rounds=3, dims=None, ridge=1e-2, prior_weight=1e-3
     if Y.ndim != 3 or Y.shape[1:] != (17, 3):
         raise ZoopraxisError(f"fit_body: joints must have shape (F, 17, 3), got {Y.shape}")
     names = tuple(LENGTH_DIMS if dims is None else dims)
-    floor = 0.2 * body.dims_vector(names)
-    poses = [None] * len(Y)
-    for round_ in range(rounds + 1):
-        prev = None
-        rms = np.zeros(len(Y))
-        for f in range(len(Y)):
-            start = poses[f] if poses[f] is not None else prev
-            poses[f], rms[f] = fit_pose(body, Y[f], start, prior_weight=prior_weight)
-            prev = poses[f]
-        if round_ == rounds:
-            break
-        d0 = body.dims_vector(names)
-        A, b = [], []
+    d_start = body.dims_vector(names)
+    floor = 0.2 * d_start
+    known = np.all(np.isfinite(Y), axis=2)                             # (F, 17)
+    Y = np.where(known[..., None], Y, 0.0)
+    poses, prev = [], None
+    for frame in np.where(known[..., None], Y, np.nan):
+        prev, _ = fit_pose(body, frame, prev, prior_weight=prior_weight)
+        poses.append(prev)
+    anchors = [p.angles.copy() for p in poses]
+    n, D, F = body.n_dofs, len(names), len(Y)
+
+    def residuals(b, ps):
+        return [((b.joints(p) - Y[f]) * known[f, :, None]).ravel() for f, p in enumerate(ps)]
+
+    def cost(b, ps):
+        r = residuals(b, ps)
+        return sum(x @ x for x in r) + prior_weight * sum(
+            np.sum((p.angles - a) ** 2) for p, a in zip(ps, anchors)) + ridge * F * np.sum(
+            (b.dims_vector(names) - d_start) ** 2)
+
+    current = cost(body, poses)
+    lam = 1e-4
+    for _ in range(iterations):
+        d = body.dims_vector(names)
+        H_dd = ridge * F * np.eye(D)
+        g_d = ridge * F * (d - d_start)
+        blocks = []
         for f, pose in enumerate(poses):
-            known = np.all(np.isfinite(Y[f]), axis=1)
-            J = body.joints_dims_jacobian(pose, names)               # (17, 3, D)
-            A.append(J[known].reshape(-1, len(names)))
-            b.append((Y[f][known] - pose.root[:3, 3]).ravel())
-        A, b = np.concatenate(A), np.concatenate(b)
-        scale = ridge * len(Y)
-        d = np.linalg.solve(A.T @ A + scale * np.eye(len(names)), A.T @ b + scale * d0)
-        # A length the data push to zero or below is unobservable noise, not a measurement.
-        d = np.maximum(d, floor)
-        body = body.with_dims(dict(zip(names, d)))
+            w = np.repeat(known[f], 3)[:, None]
+            X, Jp = body.joints_jacobian(pose)
+            A = Jp.reshape(51, -1) * w
+            B = body.joints_dims_jacobian(pose, names).reshape(51, D) * w
+            r = ((X - Y[f]) * known[f, :, None]).ravel()
+            H_pp = A.T @ A
+            H_pp[6:, 6:] += prior_weight * np.eye(n)
+            H_pp += lam * np.diag(np.diag(H_pp) + 1e-9)
+            g_p = A.T @ r
+            g_p[6:] += prior_weight * (pose.angles - anchors[f])
+            H_pd = A.T @ B
+            solve = np.linalg.solve(H_pp, np.column_stack([H_pd, g_p]))
+            H_dd += B.T @ B - H_pd.T @ solve[:, :D]
+            g_d += B.T @ r - H_pd.T @ solve[:, D]
+            blocks.append((solve, g_p))
+        step_d = np.linalg.solve(H_dd + lam * np.diag(np.diag(H_dd)), -g_d)
+        trial_body = body.with_dims(dict(zip(names, np.maximum(d + step_d, floor))))
+        trial_poses = []
+        for pose, (solve, _) in zip(poses, blocks):
+            moved = pose.retract(-(solve[:, D] + solve[:, :D] @ step_d))
+            moved.angles = body.clamp(moved.angles)
+            trial_poses.append(moved)
+        trial = cost(trial_body, trial_poses)
+        if trial < current:
+            decrease = current - trial
+            body, poses, current = trial_body, trial_poses, trial
+            lam = max(lam / 3.0, 1e-9)
+            if decrease < 1e-10 * max(current, 1e-12):
+                break
+        else:
+            lam *= 10.0
+    rms = np.array([np.sqrt(np.sum(r ** 2) / max(3 * known[f].sum(), 1))
+                    for f, r in enumerate(residuals(body, poses))])
     return body, poses, rms
 
 
@@ -762,7 +809,9 @@ class WalkingPrior:
     eps : float
         Coefficient noise as a fraction of ``coef_std`` (the paper's epsilon).
     sigma_phase, sigma_rate : float
-        Phase noise and phase-rate noise per frame, cycles.
+        Phase noise and phase-rate noise per frame, cycles. The rate changes slowly: a
+        tracker that loses a little ground on the walker would otherwise learn to walk slower
+        and fall further behind.
     sigma_path : float or array, shape (3,)
         Path noise per frame, metres.
     sigma_turn : float or array, shape (3,)

@@ -7,12 +7,19 @@ The posterior over pose (and velocity, or walking phase) is a set of weighted sa
 2. move each by the temporal prior ``p(phi_t | phi_{t-1}, V_{t-1})`` (:mod:`motion_prior`);
 3. weight each by the image likelihood ``p(I_t | phi_t, R_t)`` (:mod:`likelihood`), whose
    appearance ``R_t`` is I(t-1) mapped onto the model at the previous estimate, or at each
-   sample's own previous pose (eq. 2; ``appearance``);
+   sample's own previous pose (eq. 2; ``appearance``), tempered when the weights would fall
+   on too few particles (:func:`tempered_weights`);
 4. report the expected pose (the weighted mean, §7) and the posterior's spread.
 
 One call of :meth:`ParticleFilter.step` is one frame, so a caller (the command line, or the
 hybrid tracker that hands the expected pose to the differential tracker) drives the filter frame
-by frame and reads the expected pose, its spread and the particle set after each.
+by frame and reads the expected pose, its spread and the particle set after each::
+
+    pf = ParticleFilter(body, cameras, WalkingPrior(body, fps=30), n_particles=2000, seed=0)
+    step = pf.start(images_of_frame_0, pose_0)        # one image per camera
+    for images in later_frames:
+        step = pf.step(images)                        # step.pose, step.spread, step.status,
+                                                      # step.roots, step.angles, step.weights
 
 Everything is vectorized over the particles: the kinematics of all particles is one batched
 product of exponentials (:class:`BatchKinematics`), the likelihood a few array operations per
@@ -268,20 +275,22 @@ class ParticleFilter:
         Seeds every random draw (resampling, prior noise, pixel sampling): the same inputs
         give the same track.
     likelihood : ImageLikelihood, optional
-        Default: ``ImageLikelihood(body, cameras, seed=seed, **likelihood_options)``.
+        Default: ``ImageLikelihood(body, cameras, seed=seed + 1, **likelihood_options)``.
     appearance : {"estimate", "particle"}
         Where I(t-1) is mapped onto the model (eq. 2): at the previous expected pose, shared
-        by all particles (drift-resistant: a particle that slides off a limb onto a static
-        background mismatches), or at each particle's own previous pose, as in the paper's
-        §4.1 (each hypothesis judged by its own motion only, so a direction the image does
-        not see, such as the twist of a straight arm, stays uncertain).
+        by all particles, or at each particle's own previous pose, as the paper's §4.1 does.
+        The shared appearance resists drift: a particle that slides off a limb onto a static
+        background no longer matches it, whereas with its own appearance a limb that stands
+        still over a static background matches perfectly, wherever it is. (What keeps the
+        twist of a straight arm uncertain is the limb surface, ``surface="patch"``.)
     min_ess : float
         Effective sample size, as a share of ``n_particles``, below which a frame's
         likelihood is tempered (:func:`tempered_weights`); 0 for the plain filter.
     lost_inliers, uncertain_spread : float
         Thresholds of :attr:`FilterStep.status`.
     **likelihood_options
-        Passed to :class:`ImageLikelihood` (``sigma_image``, ``n_points``, ``beta``, ...).
+        Passed to :class:`ImageLikelihood` (``sigma_image``, ``n_points``, ``surface``,
+        ``appearance_rate``, ...).
     """
 
     def __init__(self, body, cameras, prior, *, n_particles=1000, seed=0, likelihood=None,
