@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 
 from . import se3
-from .background import estimate_background, model_coverage
+from .background import estimate_background, model_coverage, silhouette_iou
 from .body import Pose
 from .camera import ScaledOrthoCamera
 from .differential import DifferentialTracker, Settings, State, prepare_images
@@ -30,6 +30,9 @@ from .result import TrackResult
 # overlap the other way says little), compared with the same fraction at the anchor frame; the
 # grey residual is compared with the take's median.
 FIT_LOST, FIT_UNCERTAIN = 0.6, 0.85          # fraction of the anchor frame's silhouette fit
+# The fit is what the silhouette term optimizes, so a model that shrank into one part of the
+# person still fits; the overlap (intersection over union) relative to the anchor's catches it.
+IOU_LOST, IOU_UNCERTAIN = 0.55, 0.75
 RESIDUAL_LOST, RESIDUAL_UNCERTAIN = 4.0, 2.5   # times the take's median residual
 MIN_ANCHOR_FIT = 0.6     # below this the foreground masks of a view are too poor to use
 
@@ -103,6 +106,42 @@ def _blend_states(a, b, w):
         out.cameras = [ca.replace(s=float(np.exp((1 - w) * np.log(ca.s) + w * np.log(cb.s))))
                        for ca, cb in zip(a.cameras, b.cameras)]
     return out
+
+
+def frame_status(rel_fit, rel_iou, residual_ratio):
+    """ok, uncertain or lost, from one frame's diagnostics.
+
+    Parameters
+    ----------
+    rel_fit, rel_iou : array, shape (V,)
+        Silhouette fit and overlap per view relative to the anchor frame's (NaN: no mask).
+    residual_ratio : float
+        The frame's worst grey residual over the take's median.
+    """
+    rel_fit = np.asarray(rel_fit, float)
+    rel_iou = np.asarray(rel_iou, float)
+    rel_fit, rel_iou = rel_fit[np.isfinite(rel_fit)], rel_iou[np.isfinite(rel_iou)]
+    if ((len(rel_fit) and np.median(rel_fit) < FIT_LOST)
+            or (len(rel_iou) and np.median(rel_iou) < IOU_LOST)
+            or residual_ratio > RESIDUAL_LOST):
+        return "lost"
+    if ((len(rel_fit) and rel_fit.min() < FIT_UNCERTAIN)
+            or (len(rel_iou) and rel_iou.min() < IOU_UNCERTAIN)
+            or residual_ratio > RESIDUAL_UNCERTAIN):
+        return "uncertain"
+    return "ok"
+
+
+def _blend_report(fwd, bwd, w, measured):
+    """Diagnostics of a blended frame: residuals weighted like the poses, the silhouette
+    fit and overlap measured on the blended pose."""
+    from .differential import StepReport
+
+    fit, iou = measured
+    return StepReport(residual=(1 - w) * fwd.residual + w * bwd.residual,
+                      iou=iou, cost=(1 - w) * fwd.cost
+                      + w * bwd.cost, iterations=fwd.iterations + bwd.iterations,
+                      renders=None, coverage=fit)
 
 
 def anchor_frames_all(anchors):
@@ -237,15 +276,17 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
                     f"(covers {cov:.0%} of the body); silhouettes off")
     # Overlap of model and foreground at the anchors: the reference for the status.
     ref_fit = np.full(len(views), np.nan)
+    ref_iou = np.full(len(views), np.nan)
     for c in range(len(views)):
         if use_bg[c]:
             fg = backgrounds[c].foreground(colour0[c])
             ref_fit[c] = model_coverage(r0[c].label >= 0, fg)
+            ref_iou[c] = max(silhouette_iou(r0[c].label >= 0, fg), 0.05)
             if ref_fit[c] < MIN_ANCHOR_FIT:
                 use_bg[c] = False
                 log(f"view '{views[c]}': only {ref_fit[c]:.0%} of the model lies in the "
                     "foreground at the anchor; silhouettes off")
-                ref_fit[c] = np.nan
+                ref_fit[c] = ref_iou[c] = np.nan
 
     def images(frame):
         out = []
@@ -295,6 +336,21 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
                 progress(done, total)
         return out
 
+    def blended_fit(state, frame):
+        """Silhouette fit and overlap of a blended pose, measured anew: they are not either
+        pass's."""
+        fit = np.full(len(views), np.nan)
+        iou = np.full(len(views), np.nan)
+        if not any(use_bg):
+            return fit, iou
+        renders = tracker.render_views(state, want=())
+        for c, img in enumerate(source.colour(frame)):
+            if use_bg[c]:
+                fg = backgrounds[c].foreground(img)
+                fit[c] = model_coverage(renders[c].label >= 0, fg)
+                iou[c] = silhouette_iou(renders[c].label >= 0, fg)
+        return fit, iou
+
     cancelled = False
     try:
         for a, b, kind in passes:
@@ -307,7 +363,8 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
             for f in range(a + 1, b):
                 w = (f - a) / (b - a)
                 states[f] = _blend_states(fwd[f][0], bwd[f][0], w)
-                reports[f] = fwd[f][1] if w < 0.5 else bwd[f][1]
+                reports[f] = _blend_report(fwd[f][1], bwd[f][1], w,
+                                           blended_fit(states[f], f))
     except Cancelled as exc:
         cancelled = True
         for f, (st, rep) in exc.args[0].items():
@@ -316,11 +373,11 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
         log("cancelled: keeping the frames tracked so far")
 
     return _make_result(body, views, plates, factors, states, reports, calibrated, init,
-                        anchor_frames, frames, cancelled, ref_fit)
+                        anchor_frames, frames, cancelled, ref_fit, ref_iou)
 
 
 def _make_result(body, views, plates, factors, states, reports, calibrated, init,
-                 anchor_frames, frames, cancelled, ref_fit):
+                 anchor_frames, frames, cancelled, ref_fit, ref_iou):
     order = sorted(states)
     F = len(order)
     joints3d = np.zeros((F, 17, 3))
@@ -366,15 +423,7 @@ def _make_result(body, views, plates, factors, states, reports, calibrated, init
         if f in anchor_frames:
             status.append("ok")
             continue
-        rel = fit[i] / ref_fit
-        rel = rel[np.isfinite(rel)]
-        worst_res = res_all[i].max()
-        if (len(rel) and np.median(rel) < FIT_LOST) or worst_res > RESIDUAL_LOST * med:
-            status.append("lost")
-        elif (len(rel) and rel.min() < FIT_UNCERTAIN) or worst_res > RESIDUAL_UNCERTAIN * med:
-            status.append("uncertain")
-        else:
-            status.append("ok")
+        status.append(frame_status(fit[i] / ref_fit, iou[i] / ref_iou, res_all[i].max() / med))
     fps = plates[views[0]].fps or 30.0
     body_info = {"template": body.template, "shapes": body.shapes,
                  "dims": {k: round(v, 5) for k, v in body.dims.items()},

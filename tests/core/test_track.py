@@ -142,3 +142,13 @@ def test_blend_states_interpolates():
     assert np.allclose(m.angles, 0.5)
     assert np.allclose(se3.log_se3(m.roots[0]), [0.1, 0, 0, 0, 0, 0.2])
     assert np.isclose(m.cameras[0].s, 20.0)
+
+
+def test_frame_status_from_silhouettes_and_residuals():
+    nan = np.nan
+    assert T.frame_status([1.0, 0.95], [1.0, 0.9], 1.0) == "ok"
+    assert T.frame_status([1.0, 0.7], [1.0, 0.9], 1.0) == "uncertain"      # one view slips
+    assert T.frame_status([0.5, 0.4], [1.0, 1.0], 1.0) == "lost"           # off the person
+    assert T.frame_status([1.0, 1.0], [0.4, 0.5], 1.0) == "lost"           # shrunk into it
+    assert T.frame_status([nan], [nan], 3.0) == "uncertain"                # no masks: residual
+    assert T.frame_status([nan], [nan], 5.0) == "lost"
