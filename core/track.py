@@ -29,10 +29,10 @@ from .result import TrackResult
 # the foreground (shadows and loose clothes make the foreground larger than the model, so the
 # overlap the other way says little), compared with the same fraction at the anchor frame; the
 # grey residual is compared with the take's median.
-FIT_LOST, FIT_UNCERTAIN = 0.6, 0.85          # fraction of the anchor frame's silhouette fit
+FIT_LOST, FIT_UNCERTAIN = 0.6, 0.8           # fraction of the anchor frame's silhouette fit
 # The fit is what the silhouette term optimizes, so a model that shrank into one part of the
 # person still fits; the overlap (intersection over union) relative to the anchor's catches it.
-IOU_LOST, IOU_UNCERTAIN = 0.55, 0.75
+IOU_LOST, IOU_UNCERTAIN = 0.5, 0.6
 RESIDUAL_LOST, RESIDUAL_UNCERTAIN = 4.0, 2.5   # times the take's median residual
 MIN_ANCHOR_FIT = 0.6     # below this the foreground masks of a view are too poor to use
 
