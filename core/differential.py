@@ -54,7 +54,7 @@ class Settings:
     velocity: float = 0.5             # fraction of the last motion used to predict the next
     prior_weight: float = 0.01        # pull towards the prediction, relative to the data
     damping: float = 1e-3             # initial Levenberg-Marquardt damping
-    collision_weight: float = 5e5     # limb overlap penalty, per square metre
+    collision_weight: float = 3e4     # limb overlap penalty, per square metre
 
 
 @dataclass
