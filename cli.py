@@ -25,6 +25,8 @@ COMMANDS = {
               "track a body through plates from clicked joints and write result.json"),
     "demo": ("core.cli_demo", "main", "run the whole pipeline on the bundled sample"),
     "bake": ("core.cli_bake", "main", "key a tracked take onto an armature; write .blend, BVH, FBX"),
+    "calibrate": ("core.cli_calibrate", "main", "calibrate the cameras from a board in the plates"),
+    "init": ("core.cli_init", "main", "fit the body to the clicked joints of the anchor frames"),
 }
 
 

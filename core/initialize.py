@@ -17,14 +17,18 @@ Two modes, as in the papers:
   lives in a body-centred frame.
 
 The problem is tri-linear (§2.6) and has mirror ambiguities, so it is solved from good starting
-points (triangulated joints; several orientations) by ``scipy.optimize.least_squares`` with
-analytic Jacobians, a robust loss on the clicks, bounds for the joint limits and the dimensions,
-and weak priors towards the rest angles and the default proportions (what the clicks cannot
-see, e.g. the split of a bend between the two spine joints, stays put). Clicks that look swapped
-left for right, outliers and a mirrored pose that fits as well are reported, not absorbed.
+points (calibrated: triangulated joints, the trunk placed by Kabsch, inverse kinematics with
+several starts per limb; uncalibrated: the body turned every 45 degrees, affine cameras for
+the other views) by ``scipy.optimize.least_squares`` with analytic Jacobians, a robust loss on
+the clicks, bounds for the joint limits and the dimensions, and priors of everyday angles and
+of the template's proportions (what the clicks cannot see, e.g. the split of a bend between the
+two spine joints, takes its likely value). In a frame clicked in one view, every limb is also
+tried mirrored in depth. Clicks that look swapped left for right and outlying clicks are named
+in warnings and not absorbed; a mirrored pose that fits about as well is reported.
 
 :func:`refine_dims` is the building block of model fine-tuning (§2.7): the same joint problem
-over many tracked frames, where the tracker's projected joints are the observations.
+over many tracked frames, where the tracker's projected joints are the observations; it is
+solved by blocks (Schur complement on the shared dimensions, as in bundle adjustment).
 
 Convention: world Z up, metres; OpenCV cameras and pixels (``X_c = R @ X_w + t``). Body
 dimensions are the body model's ``LENGTH_DIMS`` (metres). Rotations in the parameter vectors
@@ -40,7 +44,7 @@ from scipy.optimize import least_squares
 from . import se3
 from .body import (DEFAULT_DIMS, DIM_NAMES, LENGTH_DIMS, RADIUS_DIMS, Pose, make_body,
                    reference_points)
-from .camera import PinholeCamera, ScaledOrthoCamera
+from .camera import ScaledOrthoCamera
 from .errors import ZoopraxisError
 from .joints import JOINT_INDEX, STANDARD_JOINTS
 
@@ -73,7 +77,7 @@ ANGLE_PRIOR_DEG = {
 # Spread of each length about the template's proportions, and of the overall body size about
 # the template's: weakly held in calibrated views (one view cannot tell size from distance),
 # fixed in scaled orthographic views (the camera scale absorbs it).
-DIMS_PRIOR_SIGMA = 0.08
+DIMS_PRIOR_SIGMA = 0.05
 SIZE_PRIOR_SIGMA = {True: 0.12, False: 0.002}
 # In 3D inverse kinematics (starting points only) a prior spread costs this many metres.
 IK_PRIOR_M = 0.01
@@ -87,6 +91,22 @@ LIMB_FLIPS = tuple((f"{s}_{a}", tuple(f"{s}_{j}" for j in rest)) for s in ("l", 
                    for a, *rest in (("shoulder", "elbow", "wrist"), ("elbow", "wrist"),
                                     ("hip", "knee", "ankle", "toe"), ("knee", "ankle", "toe")))
 
+# Parts of the body named in reports, by the joints that move with them.
+BODY_PARTS = {"the trunk": ("neck", "l_shoulder", "r_shoulder", "l_hip", "r_hip"),
+              "the head": ("head",),
+              "the left arm": ("l_elbow", "l_wrist"), "the right arm": ("r_elbow", "r_wrist"),
+              "the left leg": ("l_knee", "l_ankle", "l_toe"),
+              "the right leg": ("r_knee", "r_ankle", "r_toe")}
+
+# An alternative pose whose cost is within this many px^2 of the best one fits as well: under
+# clicks of CLICK_SIGMA_PX it is at most e times less likely.
+AMBIGUOUS_COST = CLICK_SIGMA_PX ** 2
+_AMBIGUOUS_M = 0.10     # ... and it is a different pose if some joint moves this far
+
+# Joints of the trunk, nearly rigid and nearly planar: they give a body's position and heading.
+_TORSO = [JOINT_INDEX[n] for n in ("pelvis", "l_hip", "r_hip", "neck", "l_shoulder",
+                                   "r_shoulder", "head")]
+
 # A joint this many pixels (and this many times the view's median error) off the fit is named.
 OUTLIER_PX = 4.0 * LOSS_SCALE_PX
 OUTLIER_RATIO = 5.0
@@ -97,9 +117,10 @@ _MIN_VIEW_JOINTS = 4       # an uncalibrated view needs this many clicks to plac
 _MIN_FRAME_JOINTS = 6      # joints a frame needs in its best view to pose the body
 # A limb whose mirror image moves no joint more than this is not worth trying mirrored.
 _MIN_FLIP_M = 0.05
-# Above this many Jacobian entries the solver works on a sparse matrix (frames couple only
-# through the dimensions).
-_DENSE_LIMIT = 3_000_000
+_EXPLORE_NFEV = 30         # evaluations of a short fit that ranks a mirrored limb
+# Above this many Jacobian entries the problem is solved by blocks (frames couple only through
+# the dimensions); below, by scipy's least_squares on a dense Jacobian.
+_DENSE_LIMIT = 400_000
 
 # The camera that sees the body's front in the reference configuration (facing -Y, Z up):
 # camera x = body +X (the subject's left on the image right), camera y = -Z, camera z = +Y.
@@ -294,6 +315,7 @@ class _Problem:
         self.cam_t = np.array([c.t[:2] for c in cams]).reshape(-1, 2)
         self.cam_c = np.array([c.c for c in cams]).reshape(-1, 2)
         self._cache_x = None
+        self._fixed_joints = None       # the joints, when no body parameter is free
 
     # -- parameters ---------------------------------------------------------------------------
 
@@ -370,6 +392,15 @@ class _Problem:
 
     def _joints(self, x):
         """World joints (F, 17, 3) and their derivatives by the frame parameters and dims."""
+        body_fixed = not (self.fit_dims or self.free_root or self.free_angles)
+        if body_fixed and self._fixed_joints is not None:
+            return self._fixed_joints
+        out = self._moving_joints(x)
+        if body_fixed:
+            self._fixed_joints = out
+        return out
+
+    def _moving_joints(self, x):
         dims, _, p, w, R, angles, _ = self._split(x)
         Y, JA, Yd = self.kin.forward(angles, dims)
         X = Y @ np.swapaxes(R, -1, -2) + p[:, None]
@@ -483,18 +514,99 @@ class _Problem:
         return r, J
 
     def solve(self, max_nfev=200):
-        """Run the robust fit; returns (state, cost) with cost in pixels squared."""
+        """Run the robust fit; returns (state, cost) with cost ``0.5 sum rho`` in px^2.
+
+        Small problems go to ``least_squares`` (dogbox: its box-shaped trust region copes with
+        angles resting on their limits). Large ones, many frames coupled only through the
+        dimensions, to :meth:`_solve_blocks`.
+        """
         x0 = self.x0()
         if self.n_params == 0 or self.m_obs == 0:
             return self.state.copy(), 0.0
         lo, hi = self.bounds()
-        dense = not sparse.issparse(self.evaluate(x0)[1])
+        if sparse.issparse(self.evaluate(x0)[1]):
+            x, cost = self._solve_blocks(x0, lo, hi, max_iter=max_nfev)
+            return self.unpack(x), cost
         result = least_squares(
             lambda x: self.evaluate(x)[0], x0, jac=lambda x: self.evaluate(x)[1],
             bounds=(lo, hi), method="dogbox", loss=_soft_l1(self.m_obs, self.loss_scale),
-            f_scale=1.0, x_scale=1.0, max_nfev=max_nfev,
-            tr_solver="exact" if dense else "lsmr")
+            f_scale=1.0, x_scale=1.0, max_nfev=max_nfev)
         return self.unpack(result.x), float(result.cost)
+
+    def _cost(self, r):
+        return 0.5 * float(np.sum(_soft_l1(self.m_obs, self.loss_scale)(r ** 2)[0]))
+
+    def _solve_blocks(self, x, lo, hi, max_iter=100):
+        """Levenberg-Marquardt by the Schur complement, as in bundle adjustment.
+
+        The normal equations of a frame's own parameters (root, angles, cameras) form one
+        block; the blocks couple only through the global ones (dimensions, size), which are
+        solved first from the reduced system ``S = V - sum_f W_f U_f^-1 W_f^T``. The robust loss
+        enters as iteratively reweighted least squares; bounds by projecting each step.
+
+        Returns
+        -------
+        x : array, shape (N,)
+        cost : float
+        """
+        G = self.off_frame
+        F = self.F
+        local = [list(range(self.off_frame + f * self.frame_size,
+                            self.off_frame + (f + 1) * self.frame_size)) for f in range(F)]
+        for i, (f, _) in enumerate(self.free_pairs):
+            local[f] += list(range(self.off_cam + i * _CAM_PARAMS,
+                                   self.off_cam + (i + 1) * _CAM_PARAMS))
+        P = max(len(cols) for cols in local)
+        index = np.full((F, P), -1)
+        for f, cols in enumerate(local):
+            index[f, :len(cols)] = cols
+        pad = index < 0
+        idx = np.where(pad, 0, index)
+        loss = _soft_l1(self.m_obs, self.loss_scale)
+        r, J = self.evaluate(x)
+        cost = self._cost(r)
+        lam = 1e-3
+        for _ in range(max_iter):
+            w = loss(r ** 2)[1]
+            Jw = sparse.diags(w) @ J
+            H = (J.T @ Jw).tocsr()
+            g = -(Jw.T @ r)
+            H_gg = H[:G, :G].toarray()
+            H_gl = H[:G].toarray()[:, idx] * ~pad                         # (G, F, P)
+            U_full = np.zeros((F, P, P))
+            for f, cols in enumerate(local):
+                U_full[f, :len(cols), :len(cols)] = H[cols][:, cols].toarray()
+            b_l = np.where(pad, 0.0, g[idx])
+            while True:
+                A = U_full + lam * (np.eye(P) * (np.diagonal(U_full, axis1=1, axis2=2)[:, None]
+                                                 + 1e-9)) + np.eye(P) * pad[:, None, :]
+                Ainv_b = np.linalg.solve(A, b_l[..., None])[..., 0]           # (F, P)
+                if G:
+                    Wt = np.transpose(H_gl, (1, 2, 0))                      # (F, P, G)
+                    Ainv_W = np.linalg.solve(A, Wt)                         # (F, P, G)
+                    S = H_gg + lam * np.diag(np.diag(H_gg) + 1e-9) \
+                        - np.einsum("fpg,fph->gh", Wt, Ainv_W)
+                    d_g = np.linalg.solve(S, g[:G] - np.einsum("fpg,fp->g", Wt, Ainv_b))
+                    d_l = Ainv_b - Ainv_W @ d_g
+                else:
+                    d_g, d_l = np.zeros(0), Ainv_b
+                step = np.zeros_like(x)
+                step[:G] = d_g
+                step[idx[~pad]] = d_l[~pad]
+                x_new = np.clip(x + step, lo, hi)
+                r_new, J_new = self.evaluate(x_new)
+                cost_new = self._cost(r_new)
+                if cost_new < cost:
+                    break
+                lam *= 4.0
+                if lam > 1e8:
+                    return x, cost
+            done = cost - cost_new < 1e-7 * cost
+            x, r, J, cost = x_new, r_new, J_new, cost_new
+            lam = max(lam / 3.0, 1e-7)
+            if done:
+                break
+        return x, cost
 
     def errors(self, state=None):
         """Click errors in pixels, (F, V, 17), NaN where not clicked."""
@@ -509,10 +621,10 @@ class _Problem:
 
 
 def _robust_cost(errors, c=LOSS_SCALE_PX):
-    """The fit's data term for click errors (pixels, NaN ignored): soft L1 per coordinate is
-    close to this per-point form, used to compare alternatives on the same clicks."""
+    """About what click errors (pixels, NaN ignored) add to the fit's cost, ``0.5 sum rho``
+    (the fit's soft L1 acts per coordinate; this per-point form is close)."""
     e = errors[np.isfinite(errors)]
-    return float(np.sum(2.0 * c**2 * (np.sqrt(1.0 + e**2 / c**2) - 1.0)))
+    return float(np.sum(c**2 * (np.sqrt(1.0 + e**2 / c**2) - 1.0)))
 
 
 def _fit(kin, obs, weights, state, **options):
@@ -658,6 +770,26 @@ def _ortho_camera(name, image_size, uv, Y, yaw, pitch=0.0):
     proj = Y @ R[:2].T
     shift = np.mean((uv[seen] - centre) / scale - proj[seen], axis=0)
     return ScaledOrthoCamera(name, image_size, scale, R=R, t=[shift[0], shift[1], 10.0], c=centre)
+
+
+def _affine_camera(name, image_size, uv, Y):
+    """The scaled orthographic camera closest to the affine camera that maps body points ``Y``
+    (17, 3) to clicks ``uv`` (17, 2; NaN where not clicked), by linear least squares.
+
+    An affine camera ``uv = A @ Y + b`` is fitted; the scaled rotation nearest to ``A`` has the
+    rows ``U @ Vt`` of its singular value decomposition and the mean singular value as scale.
+    """
+    seen = np.isfinite(uv).all(axis=-1)
+    Yh = np.concatenate([Y[seen], np.ones((seen.sum(), 1))], axis=1)
+    P = np.linalg.lstsq(Yh, uv[seen], rcond=None)[0].T                     # (2, 4)
+    U, S, Vt = np.linalg.svd(P[:, :3], full_matrices=False)
+    rows = U @ Vt
+    R = np.vstack([rows, np.cross(rows[0], rows[1])])
+    scale = max(float(S.mean()), 1e-6)
+    centre = ((image_size[0] - 1) / 2, (image_size[1] - 1) / 2)
+    shift = (P[:, 3] - centre) / scale
+    return ScaledOrthoCamera(name, image_size, scale, R=R, t=[shift[0], shift[1], 10.0],
+                             c=centre)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -918,8 +1050,9 @@ class _Fit:
         self.ambiguous = False
         self.swapped = []
 
-    # Subclasses: start(f) -> _State for one frame (F = 1); mirrored(state, f) -> _State or None;
-    # options() -> dict of _Problem options; result(state) -> InitResult pieces.
+    # Subclasses give start(f) -> _State of one frame (F = 1), options(state, f, fit_dims) ->
+    # _Problem options, depth_direction(state, f) and mirrored(state, f) for frames seen in one
+    # view (else None), and _cameras(state) -> (cameras, view_cameras).
 
     def run(self):
         states = [self._frame(f) for f in range(len(self.frames))]
@@ -930,38 +1063,57 @@ class _Fit:
         return self._result(state)
 
     def _frame(self, f):
-        """Best fit of one anchor frame alone, with its mirror checked."""
+        """Best fit of one anchor frame alone; alternatives that fit as well are reported."""
         obs, w = self.obs[f:f + 1], self.weights[f:f + 1]
         state = self.start(f)
-        state, cost, problem = _fit(self.kin, obs, w, state,
-                                    **self.options(state, f, fit_dims=self.fit_dims))
-        state, cost = self._explore_limbs(state, cost, f)
+        state, cost, _ = _fit(self.kin, obs, w, state,
+                              **self.options(state, f, fit_dims=self.fit_dims))
+        state, cost, rivals = self._explore_limbs(state, cost, f)
         mirrored = self.mirrored(state, f)
         if mirrored is not None:
             alt, alt_cost, _ = _fit(self.kin, obs, w, mirrored,
                                     **self.options(mirrored, f, fit_dims=self.fit_dims))
-            err = problem.errors(state)
-            alt_err = problem.errors(alt)
-            rms, alt_rms = _rms(err), _rms(alt_err)
             if alt_cost < cost:
-                state, cost, rms, alt_rms = alt, alt_cost, alt_rms, rms
-            differ = self._pose_difference(state, alt)
-            if alt_rms <= 1.3 * rms + 0.5 and differ > 0.03:
+                rivals.append((state, cost))
+                state, cost = alt, alt_cost
+            else:
+                rivals.append((alt, alt_cost))
+        seen = []
+        for alt, alt_cost in rivals:
+            if alt_cost > cost + 4 * AMBIGUOUS_COST or not self._moved_parts(state, alt):
+                continue
+            # Rivals come from short fits: converge the close ones before judging them.
+            alt, alt_cost, _ = _fit(self.kin, obs, w, alt,
+                                    **self.options(alt, f, fit_dims=self.fit_dims))
+            if alt_cost > cost + AMBIGUOUS_COST:
+                continue
+            moved = self._moved_parts(state, alt)
+            if moved and moved not in seen:
+                seen.append(moved)
                 self.ambiguous = True
                 self.warnings.append(
-                    f"frame {self.frames[f]}: the mirrored (depth-flipped) pose fits about as "
-                    f"well (rms {alt_rms:.1f} px vs {rms:.1f} px, joints {1000 * differ:.0f} mm "
-                    "apart); the 3D pose may be mirrored: click this frame in another view")
+                    f"frame {self.frames[f]}: a pose with {_join(moved)} mirrored in depth "
+                    f"fits about as well (cost {alt_cost:.1f} vs {cost:.1f} px^2); the 3D pose "
+                    "is uncertain there: click this frame in another view")
         return state
 
     def _explore_limbs(self, state, cost, f):
         """Try each limb (and each lower limb) turned to its depth mirror image, §2.6's
         ambiguity of a single view: a bone pointing towards the camera projects like one
         pointing away. Local fits cannot cross between the two, so each is started by inverse
-        kinematics from the reflected joints and kept if it fits better (clicks and prior)."""
+        kinematics from the reflected joints and kept if it fits better (clicks and prior).
+
+        Returns
+        -------
+        state : _State
+        cost : float
+        rivals : list of (_State, float)
+            The alternatives met, for the ambiguity report.
+        """
+        rivals = []
         normal = self.depth_direction(state, f)
         if normal is None:
-            return state, cost
+            return state, cost, rivals
         obs, w = self.obs[f:f + 1], self.weights[f:f + 1]
         names = self.kin.structure.dof_names
         for _ in range(2):
@@ -981,22 +1133,33 @@ class _Fit:
                          if name.startswith((pivot + "_",) + tuple(j + "_" for j in distal))]
                 angles = state.angles[0].copy()
                 angles[moved] = self.kin.prior_mean[moved]
-                root, angles = _fit_3d(self.kin, target, state.dims, state.roots[0], angles,
-                                       free_root=False, dofs=moved)
+                root, angles, _ = _fit_3d(self.kin, target, state.dims, state.roots[0], angles,
+                                          free_root=False, dofs=moved)
                 trial = state.copy()
                 trial.roots[0], trial.angles[0] = root, angles
-                trial, trial_cost, _ = _fit(self.kin, obs, w, trial,
+                # A short fit tells the basins apart; the winner is refined below.
+                trial, trial_cost, _ = _fit(self.kin, obs, w, trial, max_nfev=_EXPLORE_NFEV,
                                             **self.options(trial, f, fit_dims=self.fit_dims))
                 if trial_cost < cost - 1e-6:
+                    rivals.append((state, cost))
                     state, cost, improved = trial, trial_cost, True
+                else:
+                    rivals.append((trial, trial_cost))
             if not improved:
                 break
-        return state, cost
+            state, cost, _ = _fit(self.kin, obs, w, state,
+                                  **self.options(state, f, fit_dims=self.fit_dims))
+        return state, cost, rivals
 
-    def _pose_difference(self, a, b):
+    def _moved_parts(self, a, b):
+        """Body parts (``BODY_PARTS`` names) whose joints differ by more than _AMBIGUOUS_M
+        between two poses of a frame, with the trunks aligned."""
         Ya = self.kin.forward(a.angles, a.dims)[0][0]
         Yb = self.kin.forward(b.angles, b.dims)[0][0]
-        return procrustes_mpjpe(Ya, Yb)
+        R, t, scale = similarity_from_points(Ya[_TORSO], Yb[_TORSO])
+        apart = np.linalg.norm(scale * Ya @ R.T + t - Yb, axis=-1)
+        return [part for part, joints in BODY_PARTS.items()
+                if apart[[JOINT_INDEX[j] for j in joints]].max() > _AMBIGUOUS_M]
 
     def _merge(self, states):
         dims = np.median([s.dims for s in states], axis=0)
@@ -1014,49 +1177,64 @@ class _Fit:
     def _check_swaps(self, state, cost):
         """Find click pairs that look exchanged (left for right) in one view, §2.6's clicks.
 
-        A pair is a suspect when its two clicks lie off the fit and nearer the other's
-        projection. A suspect is confirmed when fitting with the pair exchanged lowers the cost
-        a lot; the fit then keeps the exchanged clicks and a warning names them.
+        A pair is a suspect when its clicks lie off the fit, each nearer the other's
+        projection. A frame clicked in one view only bends towards wrong clicks, so there
+        every pair is a suspect once some click lies far off. A suspect is confirmed when
+        fitting with the pair exchanged removes most of what the pair costs; the fit then keeps
+        the exchanged clicks and a warning names them.
         """
-        err = self._errors(state)
-        proj = self._projections(state)
         for f in range(len(self.frames)):
-            clicked_views = [v for v in range(len(self.views)) if np.isfinite(self.obs[f, v]).any()]
-            for v in clicked_views:
-                for left, right in LR_PAIRS:
-                    a, b = JOINT_INDEX[left], JOINT_INDEX[right]
-                    o = self.obs[f, v]
-                    if not (np.isfinite(o[a]).all() and np.isfinite(o[b]).all()):
-                        continue
-                    apart = np.linalg.norm(o[a] - o[b])
-                    if apart < 2 * LOSS_SCALE_PX:
-                        continue
-                    e_now = err[f, v, a] ** 2 + err[f, v, b] ** 2
-                    p = proj[f, v]
-                    e_swap = np.sum((p[a] - o[b]) ** 2) + np.sum((p[b] - o[a]) ** 2)
-                    # In a frame clicked in one view the fit bends towards wrong clicks, so there
-                    # a smaller misfit makes a suspect.
-                    floor = LOSS_SCALE_PX if len(clicked_views) == 1 else 2 * LOSS_SCALE_PX
-                    if e_now < 2 * floor ** 2 or e_swap > 0.5 * e_now:
-                        continue
-                    obs = self.obs.copy()
-                    obs[f, v, [a, b]] = obs[f, v, [b, a]]
-                    alt, alt_cost = self._solve_all(state, obs)
-                    gain = cost - alt_cost
-                    if alt_cost < 0.6 * cost and gain > 2 * LOSS_SCALE_PX ** 2:
-                        alt_err = _Problem(self.kin, obs, self.weights, alt, free_root=False,
-                                           free_angles=False, fit_dims=False).errors()
-                        self.warnings.append(
-                            f"frame {self.frames[f]}, view {self.views[v]}: {left} and {right} "
-                            f"look swapped ({np.sqrt(e_now / 2):.1f} px from the fit, "
-                            f"{np.nanmax(alt_err[f, v, [a, b]]):.1f} px if exchanged); fitted "
-                            "them exchanged: check the clicks")
-                        self.swapped.append((self.frames[f], self.views[v], left, right))
-                        self.obs = obs
-                        state, cost = alt, alt_cost
-                        err = self._errors(state)
-                        proj = self._projections(state)
+            clicked = [v for v in range(len(self.views)) if np.isfinite(self.obs[f, v]).any()]
+            for v in clicked:
+                for _ in range(2):       # a second exchanged pair in the same view
+                    err = self._errors(state)
+                    found = self._best_swap(state, cost, err, f, v, single=len(clicked) == 1)
+                    if found is None:
+                        break
+                    (left, right), alt, alt_cost, obs, before = found
+                    alt_err = _Problem(self.kin, obs, self.weights, alt, free_root=False,
+                                       free_angles=False, fit_dims=False).errors()
+                    pair = [JOINT_INDEX[left], JOINT_INDEX[right]]
+                    self.warnings.append(
+                        f"frame {self.frames[f]}, view {self.views[v]}: {left} and {right} look "
+                        f"swapped ({before:.1f} px from the fit, "
+                        f"{np.nanmax(alt_err[f, v, pair]):.1f} px if exchanged); fitted them "
+                        "exchanged: check the clicks")
+                    self.swapped.append((self.frames[f], self.views[v], left, right))
+                    self.obs, state, cost = obs, alt, alt_cost
         return state
+
+    def _best_swap(self, state, cost, err, f, v, single):
+        """The exchanged pair of view ``v`` in frame ``f`` that lowers the cost most, if any
+        lowers it enough: ``((left, right), state, cost, obs, error before)`` or None."""
+        o = self.obs[f, v]
+        proj = self._projections(state)[f, v]
+        far_off = np.nanmax(err[f, v]) > OUTLIER_PX
+        best = None
+        for left, right in LR_PAIRS:
+            a, b = JOINT_INDEX[left], JOINT_INDEX[right]
+            if not (np.isfinite(o[a]).all() and np.isfinite(o[b]).all()):
+                continue
+            apart = np.linalg.norm(o[a] - o[b])
+            if apart < 2 * LOSS_SCALE_PX:
+                continue
+            e_now = err[f, v, a] ** 2 + err[f, v, b] ** 2
+            e_swap = np.sum((proj[a] - o[b]) ** 2) + np.sum((proj[b] - o[a]) ** 2)
+            off = np.sqrt(e_now / 2)
+            suspect = (off > 3 * LOSS_SCALE_PX and off > 0.5 * apart and e_swap < 0.8 * e_now) \
+                or (single and far_off)
+            if not suspect:
+                continue
+            obs = self.obs.copy()
+            obs[f, v, [a, b]] = obs[f, v, [b, a]]
+            alt, alt_cost = self._solve_all(state, obs)
+            # Exchanging must remove most of what the pair costs now.
+            pair_cost = _robust_cost(err[f, v, [a, b]])
+            gain = cost - alt_cost
+            if gain > max(0.5 * pair_cost, 2 * LOSS_SCALE_PX ** 2) and \
+                    (best is None or alt_cost < best[2]):
+                best = ((left, right), alt, alt_cost, obs, off)
+        return best
 
     def _check_outliers(self, state):
         err = self._errors(state)
@@ -1109,9 +1287,9 @@ class _Fit:
                           swapped=self.swapped)
 
 
-def _rms(err):
-    e = err[np.isfinite(err)]
-    return float(np.sqrt(np.mean(e ** 2))) if e.size else 0.0
+def _join(words):
+    """'a', 'a and b', 'a, b and c'."""
+    return words[0] if len(words) == 1 else ", ".join(words[:-1]) + " and " + words[-1]
 
 
 def _fit_3d(kin, target, dims, root, angles, free_root=True, dofs=None):
@@ -1168,7 +1346,55 @@ def _fit_3d(kin, target, dims, root, angles, free_root=True, dofs=None):
     res = least_squares(lambda x: fun(x)[0], x0, jac=lambda x: fun(x)[1], bounds=(lo, hi),
                         method="dogbox", loss="soft_l1", f_scale=0.05, max_nfev=100)
     p, _, R, a = split(res.x)
-    return se3.transform(se3.orthonormalize(R), p), np.clip(a, kin.lower, kin.upper)
+    return se3.transform(se3.orthonormalize(R), p), np.clip(a, kin.lower, kin.upper), res.cost
+
+
+# Limbs whose angles the 3D starting fit tries from several starts, with the DOFs varied: a
+# limb's roll and lift can wind the wrong way round and lock on a joint limit.
+_LIMB_STARTS = {
+    "shoulder": ("elbow", (("shoulder_rot", (-0.9, 0.0, 0.9)), ("shoulder_abd", (0.2, 1.2)))),
+    "hip": ("knee", (("hip_rot", (-0.5, 0.0, 0.5)), ("hip_flex", (0.2, 1.2)))),
+}
+
+
+_LIMB_JOINTS = {"shoulder": ("elbow", "wrist"), "hip": ("knee", "ankle", "toe")}
+# A limb whose joints all lie this close to their 3D points is taken as fitted.
+_LIMB_MISS_M = 0.04
+
+
+def _fit_limbs_3d(kin, target, dims, root, angles):
+    """Refit each arm or leg that misses its 3D points from several starts, keeping the best
+    (see _LIMB_STARTS).
+
+    Returns
+    -------
+    angles : array, shape (n,)
+    """
+    names = kin.structure.dof_names
+    index = {name: k for k, name in enumerate(names)}
+    angles = angles.copy()
+    Y = kin.forward(angles[None], dims)[0][0]
+    miss = np.linalg.norm(Y @ root[:3, :3].T + root[:3, 3] - target, axis=-1)
+    for side in ("l", "r"):
+        for proximal, (distal, grid) in _LIMB_STARTS.items():
+            prefixes = (f"{side}_{proximal}_", f"{side}_{distal}_")
+            dofs = [k for k, name in enumerate(names) if name.startswith(prefixes)]
+            limb = [JOINT_INDEX[j] for j in STANDARD_JOINTS if j.startswith(f"{side}_")
+                    and j[2:] in _LIMB_JOINTS[proximal]]
+            if not dofs or not np.nanmax(miss[limb], initial=0.0) > _LIMB_MISS_M:
+                continue
+            best = _fit_3d(kin, target, dims, root, angles, free_root=False, dofs=dofs)
+            (first, first_values), (second, second_values) = grid
+            for a in first_values:
+                for b in second_values:
+                    start = angles.copy()
+                    start[index[f"{side}_{first}"]] = a
+                    start[index[f"{side}_{second}"]] = b
+                    trial = _fit_3d(kin, target, dims, root, start, free_root=False, dofs=dofs)
+                    if trial[2] < best[2]:
+                        best = trial
+            angles = best[1]
+    return angles
 
 
 class _CalibratedFit(_Fit):
@@ -1193,14 +1419,14 @@ class _CalibratedFit(_Fit):
         X = triangulate(self.cams, obs)
         angles0 = kin.start_angles()
         Y_rest = kin.forward(angles0[None], self.dims0)[0][0]
-        torso = [JOINT_INDEX[n] for n in ("pelvis", "l_hip", "r_hip", "neck", "l_shoulder",
-                                           "r_shoulder", "head")]
-        ok = [j for j in torso if np.isfinite(X[j]).all()]
+        ok = [j for j in _TORSO if np.isfinite(X[j]).all()]
         if len(ok) >= 3 and np.linalg.matrix_rank(X[ok] - X[ok].mean(axis=0), tol=0.02) >= 2:
             R, t, scale = similarity_from_points(Y_rest[ok], X[ok])
-            scale = float(np.clip(scale, *DIMS_RANGE))
+            # Clicked bodies differ in size: start the lengths at the trunk's (when fitted).
+            scale = float(np.clip(scale, *DIMS_RANGE)) if self.fit_dims else 1.0
             dims = self.dims0 * scale
-            root, angles = _fit_3d(kin, X, dims, se3.transform(R, t), angles0)
+            root, angles, _ = _fit_3d(kin, X, dims, se3.transform(R, t), angles0)
+            angles = _fit_limbs_3d(kin, X, dims, root, angles)
             return self._state(root, angles, dims, scale)
         return self._multistart(f, angles0, Y_rest)
 
@@ -1248,9 +1474,9 @@ class _CalibratedFit(_Fit):
         n = pelvis - cam.center
         n /= np.linalg.norm(n)
         target = X - 2.0 * ((X - pelvis) @ n)[:, None] * n
-        R, t, _ = similarity_from_points(Y, target, with_scale=False)
-        root, angles = _fit_3d(self.kin, target, state.dims, se3.transform(R, t),
-                               self.kin.start_angles())
+        R, t, _ = similarity_from_points(Y[_TORSO], target[_TORSO], with_scale=False)
+        root, angles, _ = _fit_3d(self.kin, target, state.dims, se3.transform(R, t),
+                                  self.kin.start_angles())
         return self._state(root, angles, state.dims, state.size)
 
     def _cameras(self, state):
@@ -1273,11 +1499,6 @@ class _UncalibratedFit(_Fit):
                             f"joints clicked (need {_MIN_VIEW_JOINTS} to place an uncalibrated "
                             "view); view left out of this frame")
             self.weights[f, v] = 0.0
-        if self.usable.sum() == 1:
-            # One scaled orthographic view cannot tell a bone's length from its foreshortening
-            # (Bregler & Malik §3.1): keep the template's proportions; several anchors or
-            # views, or model fine-tuning over the sequence (§2.7), can fit them.
-            self.fit_dims = False
 
     def options(self, state, f, fit_dims):
         free = np.array([[c is not None for c in row] for row in state.cameras])
@@ -1310,7 +1531,7 @@ class _UncalibratedFit(_Fit):
                                max_nfev=30)[:2])
         trials.sort(key=lambda t: t[1])
         best = None
-        for state, _ in trials[:3]:
+        for state, _ in trials[:2]:
             fitted, cost, _ = _fit(kin, obs, only, state, free_root=False, fit_dims=False,
                                    free_cams=free, calibrated=False, max_nfev=100)
             if best is None or cost < best[1]:
@@ -1322,24 +1543,18 @@ class _UncalibratedFit(_Fit):
         return state
 
     def _place_camera(self, state, f, v, Y):
-        """Camera of view ``v`` alone for a known body: the best over turns and tilts."""
+        """Camera of view ``v`` alone for a known body: the affine camera of the clicks, made
+        a scaled rotation, then fitted robustly."""
         obs = self.obs[f:f + 1]
         only = np.zeros_like(self.weights[f:f + 1])
         only[0, v] = self.weights[f, v]
-        best = None
-        for yaw in np.radians(np.arange(0, 360, 30)):
-            for pitch in np.radians((-30.0, 0.0, 30.0)):
-                trial = state.copy()
-                trial.cameras[0][v] = _ortho_camera(self.views[v], self.sizes[v], obs[0, v], Y,
-                                                    yaw, pitch)
-                free = np.zeros((1, len(self.views)), bool)
-                free[0, v] = True
-                fitted, cost, _ = _fit(self.kin, obs, only, trial, free_root=False,
-                                       free_angles=False, free_cams=free, fit_dims=False,
-                                       calibrated=False, max_nfev=40)
-                if best is None or cost < best[1]:
-                    best = (fitted.cameras[0][v], cost)
-        return best[0]
+        trial = state.copy()
+        trial.cameras[0][v] = _affine_camera(self.views[v], self.sizes[v], obs[0, v], Y)
+        free = np.zeros((1, len(self.views)), bool)
+        free[0, v] = True
+        fitted, _, _ = _fit(self.kin, obs, only, trial, free_root=False, free_angles=False,
+                            free_cams=free, fit_dims=False, calibrated=False, max_nfev=50)
+        return fitted.cameras[0][v]
 
     def depth_direction(self, state, f):
         """For a frame with one usable view: that camera's viewing direction."""
@@ -1357,9 +1572,9 @@ class _UncalibratedFit(_Fit):
         Y = self.kin.forward(state.angles, state.dims)[0][0]
         M = np.eye(3) - 2.0 * np.outer(n, n)
         target = Y @ M
-        R, t, _ = similarity_from_points(Y, target, with_scale=False)
-        root, angles = _fit_3d(self.kin, target, state.dims, se3.transform(R, t),
-                               self.kin.start_angles())
+        R, t, _ = similarity_from_points(Y[_TORSO], target[_TORSO], with_scale=False)
+        root, angles, _ = _fit_3d(self.kin, target, state.dims, se3.transform(R, t),
+                                  self.kin.start_angles())
         out = _State(state.dims.copy(), state.size, np.eye(4)[None], angles[None],
                      [list(state.cameras[0])])
         for v in views:

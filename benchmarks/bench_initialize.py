@@ -1,0 +1,304 @@
+"""Benchmark of initialization (Bregler & Malik §2.6), model fine-tuning (§2.7) and calibration.
+
+Prints one table: initial-pose error against the generating body's joints (body-model poses)
+or the capture's joints (CMU poses), segment lengths, bad-click detection, dimension
+refinement over a sequence, and board calibration on synthetic images. Targets (issue #3):
+MPJPE <= 25 mm with 3 calibrated views, Procrustes-aligned MPJPE <= 40 mm with 1 uncalibrated
+view, segment lengths within 5 %, board calibration within 0.3 px.
+
+Run: ``.venv/bin/python benchmarks/bench_initialize.py [--quick]``
+"""
+
+import os
+
+# Small dense solves only lose from BLAS threads on a shared machine.
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from zoopraxis.core import body as bm  # noqa: E402
+from zoopraxis.core import calibrate as cal  # noqa: E402
+from zoopraxis.core import initialize as init  # noqa: E402
+from zoopraxis.core import se3  # noqa: E402
+from zoopraxis.core.camera import PinholeCamera, look_at, ring_of_cameras  # noqa: E402
+from zoopraxis.core.joints import JOINT_INDEX, STANDARD_JOINTS  # noqa: E402
+from zoopraxis.core.markers import Anchor  # noqa: E402
+
+NOISE_PX = 2.0
+SEGMENTS = ("thigh", "shank", "upper_arm", "forearm", "torso")
+SPREAD_DEG = {"lumbar": 10, "thorax": 10, "neck": 20, "shoulder_flex": 45, "shoulder_abd": 25,
+              "shoulder_rot": 30, "elbow_flex": 70, "hip_flex": 40, "hip_abd": 15,
+              "hip_rot": 15, "knee_flex": 70, "ankle_flex": 20, "ankle_inv": 10}
+# Plates: (image size, pixels per metre at the subject, camera distance in metres).
+VGA_4M = ((640, 480), 200.0, 4.0)
+HD_4M = ((1280, 720), 300.0, 4.0)
+FHD_10M = ((1920, 1080), 430.0, 10.0)
+FHD_100M = ((1920, 1080), 430.0, 100.0)      # telephoto: scaled orthographic in effect
+VGA_10M = ((640, 480), 200.0, 10.0)
+CMU = Path(__file__).resolve().parents[2] / "shared" / "data" / "cmu_mocap"
+
+
+def plausible_pose(body, rng):
+    spread = np.zeros(body.n_dofs)
+    for k, name in enumerate(body.dof_names):
+        bare = name[2:] if name[:2] in ("l_", "r_") else name
+        spread[k] = np.radians(next((d for key, d in SPREAD_DEG.items()
+                                     if bare.startswith(key)), 0.0))
+    angles = np.clip(rng.uniform(-spread, spread), body.lower, body.upper)
+    one_way = [k for k, n in enumerate(body.dof_names) if n.endswith(("knee_flex", "elbow_flex"))]
+    angles[one_way] = rng.uniform(0.0, spread[one_way])
+    root = se3.transform(se3.exp_so3([0.0, 0.0, rng.uniform(-np.pi, np.pi)]),
+                         [rng.uniform(-0.4, 0.4), rng.uniform(-0.4, 0.4), 0.0])
+    root[2, 3] = 0.05 - body.joints(bm.Pose(root, angles))[:, 2].min()
+    return bm.Pose(root, angles)
+
+
+def subject(rng):
+    size = rng.uniform(0.9, 1.1)
+    return bm.make_body("full", {n: bm.DEFAULT_DIMS[n] * size * rng.uniform(0.95, 1.05)
+                                 for n in bm.LENGTH_DIMS})
+
+
+def ring(n, rng, plate, target=(0.0, 0.0, 1.0)):
+    size, ppm, distance = plate
+    return ring_of_cameras(n, distance, 1.4, target, size, ppm * distance,
+                           start_angle=rng.uniform(0, 2 * np.pi))
+
+
+def clicks(cameras, X, rng):
+    return {c.name: {j: tuple(p) for j, p in zip(STANDARD_JOINTS,
+                                                  c.project(X) + rng.normal(0, NOISE_PX,
+                                                                            (17, 2)))}
+            for c in cameras}
+
+
+def mpjpe(a, b):
+    return float(np.mean(np.linalg.norm(a - b, axis=-1)))
+
+
+def segment_error(fitted, true_dims, proportions=False):
+    """Largest relative error of the main segments; ``proportions``: after removing the
+    overall size (scaled orthographic views cannot see it)."""
+    ratio = np.array([fitted.dims[n] / true_dims[n] for n in SEGMENTS])
+    if proportions:
+        ratio = ratio / np.median(ratio)
+    return float(np.abs(ratio - 1).max())
+
+
+class Table:
+    def __init__(self):
+        self.rows = []
+
+    def add(self, case, metric, values, target="", unit=""):
+        values = np.asarray(values, float)
+
+        def fmt(v):
+            return f"{v:.1f}{unit}" if abs(v) >= 10 else f"{v:.2f}{unit}"
+
+        self.rows.append((case, metric, fmt(values.mean()), fmt(values.max()), str(len(values)),
+                          target))
+        print(f"  {case}: {metric} mean {values.mean():.2f} max {values.max():.2f}",
+              file=sys.stderr, flush=True)
+
+    def print(self):
+        head = ("case", "metric", "mean", "max", "n", "target")
+        widths = [max(len(str(r[i])) for r in self.rows + [head]) for i in range(6)]
+        line = "  ".join("{:<%d}" % w for w in widths)
+        print(line.format(*head))
+        print(line.format(*("-" * w for w in widths)))
+        for row in self.rows:
+            print(line.format(*row))
+
+
+def body_model_cases(table, rng, n):
+    for label, plate in (("640x480 @4m", VGA_4M), ("1280x720 @4m", HD_4M)):
+        err, pa, seg, secs = [], [], [], []
+        for _ in range(n):
+            body = subject(rng)
+            X = body.joints(plausible_pose(body, rng))
+            cams = ring(3, rng, plate)
+            t = time.perf_counter()
+            result = init.initialize([Anchor(0, clicks(cams, X, rng))], {c.name: c for c in cams})
+            secs.append(time.perf_counter() - t)
+            err.append(1000 * mpjpe(result.joints3d(0), X))
+            pa.append(1000 * init.procrustes_mpjpe(result.joints3d(0), X))
+            seg.append(100 * segment_error(result.body, body.dims))
+        case = f"body model, 3 calibrated, {label}, 1 anchor"
+        table.add(case, "MPJPE mm", err, "<= 25")
+        table.add(case, "PA-MPJPE mm", pa)
+        table.add(case, "segment length err %", seg, "<= 5")
+        table.add(case, "time s", secs)
+    # the joint problem over three anchors
+    seg, err = [], []
+    for _ in range(max(2, n // 2)):
+        body = subject(rng)
+        cams = ring(3, rng, VGA_4M)
+        poses = [plausible_pose(body, rng) for _ in range(3)]
+        anchors = [Anchor(k, clicks(cams, body.joints(p), rng)) for k, p in enumerate(poses)]
+        result = init.initialize(anchors, {c.name: c for c in cams})
+        seg.append(100 * segment_error(result.body, body.dims))
+        err += [1000 * mpjpe(result.joints3d(k), body.joints(p)) for k, p in enumerate(poses)]
+    case = "body model, 3 calibrated, 640x480 @4m, 3 anchors"
+    table.add(case, "MPJPE mm", err, "<= 25")
+    table.add(case, "segment length err %", seg, "<= 5")
+    # uncalibrated
+    for views, label, plate in ((1, "1080p @100m", FHD_100M), (1, "1080p @10m", FHD_10M),
+                                (1, "640x480 @10m", VGA_10M), (3, "640x480 @10m", VGA_10M)):
+        pa, seg, amb, secs = [], [], [], []
+        for _ in range(n):
+            body = subject(rng)
+            X = body.joints(plausible_pose(body, rng))
+            cams = ring(views, rng, plate)
+            t = time.perf_counter()
+            result = init.initialize([Anchor(0, clicks(cams, X, rng))],
+                                     {c.name: c for c in cams}, calibrated=False)
+            secs.append(time.perf_counter() - t)
+            pa.append(1000 * init.procrustes_mpjpe(result.joints3d(0), X))
+            seg.append(100 * segment_error(result.body, body.dims, proportions=True))
+            amb.append(100.0 * result.ambiguous)
+        case = f"body model, {views} uncalibrated, {label}"
+        table.add(case, "PA-MPJPE mm", pa, "<= 40" if views == 1 else "")
+        table.add(case, "proportions err %", seg)
+        table.add(case, "reported ambiguous %", amb)
+        table.add(case, "time s", secs)
+
+
+def cmu_cases(table, rng, n):
+    from zoopraxis.core import bvh
+
+    if not CMU.is_dir():
+        print(f"  (no CMU data at {CMU}: CMU cases skipped)", file=sys.stderr)
+        return
+    frames = []
+    for name in ("131_01", "131_03", "01_01"):
+        joints = bvh.standard_joints(bvh.load_cmu(CMU / f"{name}.bvh", fps=30))
+        frames += [joints[i] for i in np.linspace(0, len(joints) - 1, max(2, n // 2)).astype(int)]
+    for views, calibrated, plate in ((3, True, VGA_4M), (1, False, FHD_100M)):
+        err, pa = [], []
+        for X in frames:
+            target = X[JOINT_INDEX["pelvis"]].copy()
+            target[2] = 1.0
+            cams = ring(views, rng, plate, target)
+            result = init.initialize([Anchor(0, clicks(cams, X, rng))],
+                                     {c.name: c for c in cams}, calibrated=calibrated)
+            if calibrated:
+                err.append(1000 * mpjpe(result.joints3d(0), X))
+            pa.append(1000 * init.procrustes_mpjpe(result.joints3d(0), X))
+        label = "640x480 @4m" if calibrated else "1080p @100m"
+        case = f"CMU frames, {views} {'calibrated' if calibrated else 'uncalibrated'}, {label}"
+        if calibrated:
+            table.add(case, "MPJPE mm (vs CMU joints)", err, "<= 25")
+        table.add(case, "PA-MPJPE mm (vs CMU joints)", pa, "" if calibrated else "<= 40")
+
+
+def swap_cases(table, rng, n):
+    found, clean_false = [], []
+    for _ in range(n):
+        body = subject(rng)
+        X = body.joints(plausible_pose(body, rng))
+        cams = ring(3, rng, VGA_4M)
+        views = clicks(cams, X, rng)
+        result = init.initialize([Anchor(0, views)], {c.name: c for c in cams})
+        clean_false.append(100.0 * bool(result.swapped))
+        left, right = init.LR_PAIRS[rng.integers(len(init.LR_PAIRS))]
+        view = f"cam{rng.integers(3)}"
+        if np.linalg.norm(np.subtract(views[view][left], views[view][right])) < 15:
+            continue                      # clicks that close are not a visible mistake
+        views[view][left], views[view][right] = views[view][right], views[view][left]
+        result = init.initialize([Anchor(0, views)], {c.name: c for c in cams})
+        found.append(100.0 * ((0, view, left, right) in result.swapped))
+    case = "swapped l/r clicks, 3 calibrated, 640x480"
+    table.add(case, "swaps named %", found)
+    table.add(case, "false swaps on clean clicks %", clean_false)
+
+
+def refine_cases(table, rng, frames):
+    truth = subject(rng)
+    cams = ring(3, rng, VGA_4M)
+    poses = {f: plausible_pose(truth, rng) for f in range(frames)}
+    obs = {f: {c.name: c.project(truth.joints(p)) + rng.normal(0, NOISE_PX, (17, 2))
+               for c in cams} for f, p in poses.items()}
+    start = {f: bm.Pose(se3.exp_se3(rng.normal(0, 0.02, 6)) @ p.root,
+                        p.angles + rng.normal(0, 0.05, p.angles.size)) for f, p in poses.items()}
+    t = time.perf_counter()
+    result = init.refine_dims(bm.make_body("full"), start, obs, {c.name: c for c in cams})
+    secs = time.perf_counter() - t
+    case = f"refine_dims, {frames} frames, 3 views, 2 px"
+    table.add(case, "segment length err %",
+              [100 * abs(result.body.dims[n] / truth.dims[n] - 1) for n in SEGMENTS])
+    table.add(case, "MPJPE mm", [1000 * mpjpe(result.body.joints(result.poses[f]),
+                                              truth.joints(p)) for f, p in poses.items()])
+    table.add(case, "time s", [secs])
+
+
+def calibration_cases(table, rng):
+    for text in ("checkerboard:9x6:0.1", "charuco:10x7:0.1:0.075"):
+        board = cal.parse_board(text)
+        cams = []
+        for i, azimuth in enumerate(np.radians([20.0, 140.0, 260.0])):
+            R, t = look_at([2.2 * np.cos(azimuth), 2.2 * np.sin(azimuth), 1.9], [0, 0, 0.4])
+            f = 820.0 + 20 * i
+            cams.append(PinholeCamera(f"cam{i}", (640, 480),
+                                      [[f, 0, 319.5 + 5 * i], [0, f, 239.5 - 3 * i], [0, 0, 1]],
+                                      [-0.12 + 0.02 * i, 0.05, 0.001, -0.001, 0.0], R, t))
+        half = board.object_points().max(axis=0) / 2
+        poses = {0: se3.transform(cal.WORLD_FROM_BOARD)}
+        for f in range(1, 16):
+            axis = np.append(rng.normal(size=2), 0.0)
+            axis /= np.linalg.norm(axis)
+            R = se3.exp_so3([0, 0, rng.uniform(-np.pi, np.pi)]) \
+                @ se3.exp_so3(axis * np.radians(rng.uniform(15, 40))) @ cal.WORLD_FROM_BOARD
+            centre = [rng.uniform(-0.2, 0.2), rng.uniform(-0.2, 0.2), rng.uniform(0.2, 0.7)]
+            poses[f] = se3.transform(R, centre - R @ half)
+        detections = {c.name: {} for c in cams}
+        for c in cams:
+            for f, T in poses.items():
+                found = cal.detect_board(cal.render_board(c, T, board, blur=0.7, noise=2.0,
+                                                          rng=rng), board)
+                if found is not None:
+                    detections[c.name][f] = found
+        t = time.perf_counter()
+        result = cal.calibrate_detections(detections, board,
+                                          {c.name: c.image_size for c in cams}, world_frame=0)
+        secs = time.perf_counter() - t
+        reproj, rot, centre = [], [], []
+        for c in cams:
+            fit = result.cameras[c.name]
+            for f in detections[c.name]:
+                X = se3.apply(poses[f], board.object_points())
+                reproj.append(np.abs(fit.project(X) - c.project(X)).max())
+            rot.append(np.degrees(np.linalg.norm(se3.log_so3(fit.R @ c.R.T))))
+            centre.append(1000 * np.linalg.norm(fit.center - c.center))
+        case = f"calibration, {board.kind}, 3 cams x 16 frames"
+        table.add(case, "reprojection RMS px", list(result.rms.values()), "<= 0.3")
+        table.add(case, "true-corner reprojection px", reproj)
+        table.add(case, "rotation err deg", rot)
+        table.add(case, "centre err mm", centre)
+        table.add(case, "time s", [secs])
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="fewer trials")
+    parser.add_argument("--seed", type=int, default=2345)
+    args = parser.parse_args()
+    rng = np.random.default_rng(args.seed)
+    n = 4 if args.quick else 10
+    table = Table()
+    body_model_cases(table, rng, n)
+    cmu_cases(table, rng, n)
+    swap_cases(table, rng, n)
+    refine_cases(table, rng, 30 if args.quick else 80)
+    calibration_cases(table, rng)
+    print()
+    table.print()
+
+
+if __name__ == "__main__":
+    main()

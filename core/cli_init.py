@@ -1,0 +1,80 @@
+"""``zoopraxis init``: pose, angles and body dimensions from the clicked joints (markers.json)."""
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from .errors import ZoopraxisError
+
+
+def build_parser():
+    p = argparse.ArgumentParser(
+        prog="zoopraxis init",
+        description="Fit the body model to the clicked joints of the anchor frames: root pose, "
+                    "joint angles and body dimensions (Bregler & Malik §2.6). Without "
+                    "--calibration every view gets a scaled orthographic camera per anchor.")
+    p.add_argument("--markers", required=True, help="markers.json with the clicked joints")
+    p.add_argument("--calibration", default=None,
+                   help="calibration.json or Pose2Sim / anipose TOML (default: uncalibrated)")
+    p.add_argument("--plate", action="append", metavar="NAME=PATH", required=True,
+                   help="a view: video file or folder of images (repeat for every view)")
+    p.add_argument("--template", default="full",
+                   help="body template: full, muybridge, sidenbladh or yamamoto (full)")
+    p.add_argument("--fixed-dims", action="store_true",
+                   help="keep the template's body dimensions instead of fitting them")
+    p.add_argument("--out", required=True, help="init.json to write")
+    p.add_argument("--force", action="store_true", help="overwrite --out")
+    return p
+
+
+def main(argv):
+    from .body import LENGTH_DIMS, TEMPLATES
+    from .calibfile import check_views, read_calibration
+    from .cli_calibrate import open_plates, parse_plate_options
+    from .initialize import initialize
+    from .markers import check_markers, read_markers
+
+    args = build_parser().parse_args(argv)
+    out = Path(args.out)
+    if out.exists() and not args.force:
+        raise ZoopraxisError(f"{out}: already exists (use --force to overwrite it)")
+    if args.template not in TEMPLATES:
+        raise ZoopraxisError(f"--template: unknown body template '{args.template}' (expected "
+                             f"one of {', '.join(TEMPLATES)})")
+    plates = open_plates(parse_plate_options(args.plate))
+    views = list(plates)
+    anchors = read_markers(args.markers)
+    check_markers(anchors, views, min(p.num_frames for p in plates.values()), args.markers)
+    if args.calibration:
+        cameras = check_views(read_calibration(args.calibration), views, args.calibration)
+        for name, camera in cameras.items():
+            if tuple(camera.image_size) != tuple(plates[name].image_size):
+                raise ZoopraxisError(
+                    f"{args.calibration}: camera '{name}' is {camera.image_size[0]}x"
+                    f"{camera.image_size[1]} but plate '{name}' is {plates[name].image_size[0]}x"
+                    f"{plates[name].image_size[1]}")
+    else:
+        cameras = {name: plate.image_size for name, plate in plates.items()}
+    mode = "calibrated" if args.calibration else "uncalibrated"
+    print(f"init: fitting {len(anchors)} anchor frame{'s' if len(anchors) > 1 else ''} in "
+          f"{len(views)} view{'s' if len(views) > 1 else ''} ({mode})", file=sys.stderr,
+          flush=True)
+    result = initialize(anchors, cameras, template=args.template,
+                        calibrated=bool(args.calibration), fit_dims=not args.fixed_dims,
+                        views=views)
+    print("body dimensions (m): " + ", ".join(f"{name} {result.body.dims[name]:.3f}"
+                                             for name in LENGTH_DIMS))
+    print("rms per view (px): " + ", ".join(f"{view} {rms:.2f}"
+                                           for view, rms in result.rms.items()))
+    for warning in result.warnings:
+        print(f"warning: {warning}")
+    if result.ambiguous:
+        print("warning: the 3D pose is ambiguous (see above)")
+    text = json.dumps(result.to_json(), indent=1)
+    try:
+        out.write_text(text + "\n")
+    except OSError as error:
+        raise ZoopraxisError(f"{out}: cannot write ({error.strerror})") from None
+    print(f"wrote {out}")
+    return 0

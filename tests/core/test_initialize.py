@@ -1,0 +1,436 @@
+"""Initialization from clicked joints (Bregler & Malik §2.6) and model fine-tuning (§2.7)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from zoopraxis import cli
+from zoopraxis.core import body as bm
+from zoopraxis.core import initialize as init
+from zoopraxis.core import se3
+from zoopraxis.core.camera import ScaledOrthoCamera, ring_of_cameras
+from zoopraxis.core.errors import ZoopraxisError
+from zoopraxis.core.joints import JOINT_INDEX, STANDARD_JOINTS
+from zoopraxis.core.markers import Anchor
+
+NOISE_PX = 2.0
+# Everyday poses for the synthetic subjects: half-range (degrees) per DOF without side prefix;
+# knees and elbows bend one way only.
+SPREAD_DEG = {"lumbar": 10, "thorax": 10, "neck": 20, "shoulder_flex": 45, "shoulder_abd": 25,
+              "shoulder_rot": 30, "elbow_flex": 70, "hip_flex": 40, "hip_abd": 15,
+              "hip_rot": 15, "knee_flex": 70, "ankle_flex": 20, "ankle_inv": 10}
+
+
+def plausible_pose(body, rng):
+    """A random everyday pose, upright, feet just above the floor, turned any way."""
+    spread = np.zeros(body.n_dofs)
+    for k, name in enumerate(body.dof_names):
+        bare = name[2:] if name[:2] in ("l_", "r_") else name
+        spread[k] = np.radians(next((d for key, d in SPREAD_DEG.items()
+                                     if bare.startswith(key)), 0.0))
+    angles = np.clip(rng.uniform(-spread, spread), body.lower, body.upper)
+    one_way = [k for k, n in enumerate(body.dof_names) if n.endswith(("knee_flex", "elbow_flex"))]
+    angles[one_way] = rng.uniform(0.0, spread[one_way])
+    root = se3.transform(se3.exp_so3([0.0, 0.0, rng.uniform(-np.pi, np.pi)]),
+                         [rng.uniform(-0.4, 0.4), rng.uniform(-0.4, 0.4), 0.0])
+    root[2, 3] = 0.05 - body.joints(bm.Pose(root, angles))[:, 2].min()
+    return bm.Pose(root, angles)
+
+
+def subject(rng, template="full"):
+    """A body of random size (0.9-1.1) whose lengths differ from the template's proportions
+    by up to 5 %."""
+    size = rng.uniform(0.9, 1.1)
+    return bm.make_body(template, {n: bm.DEFAULT_DIMS[n] * size * rng.uniform(0.95, 1.05)
+                                   for n in bm.LENGTH_DIMS})
+
+
+def clicks(cameras, X, rng, noise=NOISE_PX):
+    """Anchor views: every joint projected and disturbed by ``noise`` pixels."""
+    return {c.name: {j: tuple(p) for j, p in zip(STANDARD_JOINTS,
+                                                  c.project(X) + rng.normal(0, noise, (17, 2)))}
+            for c in cameras}
+
+
+def ring(n, rng, distance=4.0, size=(640, 480), ppm=200.0):
+    """Cameras around the subject, ``ppm`` pixels per metre at the subject."""
+    return ring_of_cameras(n, distance, 1.4, (0.0, 0.0, 1.0), size, ppm * distance,
+                           start_angle=rng.uniform(0, 2 * np.pi))
+
+
+def mpjpe(a, b):
+    return float(np.mean(np.linalg.norm(a - b, axis=-1)))
+
+
+SEGMENTS = ("thigh", "shank", "upper_arm", "forearm", "torso")
+
+
+# -- kinematics and Jacobians ------------------------------------------------------------------
+
+@pytest.mark.parametrize("template", bm.TEMPLATES)
+def test_kinematics_equal_the_body_model(template, rng):
+    kin = init._kinematics(template)
+    dims = kin.default_dims * rng.uniform(0.8, 1.2, len(bm.LENGTH_DIMS))
+    body = bm.make_body(template, dict(zip(bm.LENGTH_DIMS, dims)))
+    angles = rng.uniform(body.lower, body.upper, size=(3, body.n_dofs))
+    Y, J_angles, J_dims = kin.forward(angles, dims)
+    for b in range(3):
+        pose = bm.Pose(np.eye(4), angles[b])
+        X, J = body.joints_jacobian(pose)
+        assert np.allclose(Y[b], X, atol=1e-12)
+        assert np.allclose(J_angles[b], J[..., 6:], atol=1e-12)
+        assert np.allclose(J_dims[b], body.joints_dims_jacobian(pose), atol=1e-12)
+
+
+def _finite_difference(problem, x, h=1e-6):
+    r0 = problem.evaluate(x)[0]
+    J = np.zeros((r0.size, x.size))
+    for k in range(x.size):
+        step = np.zeros_like(x)
+        step[k] = h
+        J[:, k] = (problem.evaluate(x + step)[0] - problem.evaluate(x - step)[0]) / (2 * h)
+    return J
+
+
+@pytest.mark.parametrize("calibrated", [True, False])
+def test_problem_jacobian_against_finite_differences(calibrated, rng):
+    body = subject(rng)
+    kin = init._kinematics("full")
+    cams = ring(2, rng)
+    poses = [plausible_pose(body, rng) for _ in range(2)]
+    obs = np.stack([[c.project(body.joints(p)) for c in cams] for p in poses])
+    obs[0, 1, 3] = np.nan                                      # an unclicked joint
+    if calibrated:
+        cameras = [list(cams)] * 2
+        roots = np.stack([p.root for p in poses])
+    else:
+        cameras = [[ScaledOrthoCamera(c.name, c.image_size, 200.0,
+                                      R=c.R @ p.root[:3, :3], t=[0.1, -0.2, 5.0])
+                    for c in cams] for p in poses]
+        roots = np.tile(np.eye(4), (2, 1, 1))
+    state = init._State(kin.default_dims * 1.05, 1.02, roots,
+                        np.stack([p.angles for p in poses]), cameras)
+    free_cams = None if calibrated else np.ones((2, 2), bool)
+    problem = init._Problem(kin, obs, np.ones(obs.shape[:3]), state, free_root=calibrated,
+                            free_cams=free_cams, calibrated=calibrated)
+    x = problem.x0() + rng.normal(0, 0.02, problem.n_params)
+    x = np.clip(x, *problem.bounds())
+    J = problem.evaluate(x)[1]
+    J_fd = _finite_difference(problem, x)
+    assert np.abs(J - J_fd).max() < 1e-4 * max(1.0, np.abs(J_fd).max())
+
+
+def test_triangulate_recovers_points(rng):
+    cams = ring(3, rng)
+    X = rng.uniform(-0.5, 0.5, (17, 3)) + [0, 0, 1]
+    uv = np.stack([c.project(X) for c in cams])
+    uv[0, :5] = np.nan                                         # seen by two views only
+    uv[1:, 5] = np.nan                                         # seen by one view only
+    Xt = init.triangulate(cams, uv)
+    assert np.isnan(Xt[5]).all()
+    ok = np.isfinite(Xt).all(axis=1)
+    assert ok.sum() == 16 and np.abs(Xt[ok] - X[ok]).max() < 1e-9
+
+
+def test_similarity_from_points_recovers_transform(rng):
+    A = rng.normal(size=(10, 3))
+    R = se3.exp_so3(rng.normal(size=3))
+    B = 1.3 * A @ R.T + [1.0, 2.0, 3.0]
+    R_fit, t, s = init.similarity_from_points(A, B)
+    assert np.allclose(R_fit, R) and np.isclose(s, 1.3) and np.allclose(t, [1, 2, 3])
+    assert init.procrustes_mpjpe(A, B) < 1e-12
+
+
+# -- initialization: accuracy --------------------------------------------------------------------
+
+def test_calibrated_three_views_recover_pose_and_dims(rng):
+    """2 px clicks in 3 calibrated 720p views: initial MPJPE <= 25 mm (target), limbs within
+    5 % from one anchor."""
+    errors = []
+    for _ in range(2):
+        body = subject(rng)
+        pose = plausible_pose(body, rng)
+        X = body.joints(pose)
+        cams = ring(3, rng, size=(1280, 720), ppm=300.0)
+        result = init.initialize([Anchor(0, clicks(cams, X, rng))], {c.name: c for c in cams})
+        errors.append(mpjpe(result.joints3d(0), X))
+        assert not result.warnings and not result.ambiguous
+        assert max(result.rms.values()) < 2 * NOISE_PX
+        for name in SEGMENTS:
+            assert abs(result.body.dims[name] / body.dims[name] - 1) < 0.05, name
+    assert max(errors) < 0.025
+
+
+def test_anchor_frames_share_one_set_of_dims(rng):
+    """The joint problem over several anchors: one set of lengths, limbs within 3 %."""
+    body = subject(rng)
+    cams = ring(3, rng)
+    poses = [plausible_pose(body, rng) for _ in range(3)]
+    anchors = [Anchor(10 * k, clicks(cams, body.joints(p), rng)) for k, p in enumerate(poses)]
+    result = init.initialize(anchors, {c.name: c for c in cams})
+    assert sorted(result.poses) == [0, 10, 20]
+    for k, pose in enumerate(poses):
+        assert mpjpe(result.joints3d(10 * k), body.joints(pose)) < 0.02
+    for name in SEGMENTS:
+        assert abs(result.body.dims[name] / body.dims[name] - 1) < 0.03, name
+    # left and right are one dimension: the fitted body's segments match on both sides
+    X = result.joints3d(0)
+    thigh = [np.linalg.norm(X[JOINT_INDEX[f"{s}_hip"]] - X[JOINT_INDEX[f"{s}_knee"]])
+             for s in "lr"]
+    assert np.isclose(*thigh)
+
+
+def test_uncalibrated_one_view_procrustes_error(rng):
+    """One uncalibrated view, 2 px clicks on a 1080p plate filmed from afar (where the scaled
+    orthographic model holds): Procrustes-aligned MPJPE at most 40 mm on average (target)."""
+    errors = []
+    for _ in range(3):
+        body = subject(rng)
+        pose = plausible_pose(body, rng)
+        X = body.joints(pose)
+        cams = ring(1, rng, distance=100.0, size=(1920, 1080), ppm=430.0)
+        result = init.initialize([Anchor(0, clicks(cams, X, rng))], {"cam0": cams[0]},
+                                 calibrated=False)
+        assert isinstance(result.cameras["cam0"], ScaledOrthoCamera)
+        assert np.allclose(result.poses[0].root, np.eye(4))   # body-centred frame
+        errors.append(init.procrustes_mpjpe(result.joints3d(0), X))
+    assert np.mean(errors) < 0.040
+
+
+def test_uncalibrated_three_views_one_camera_per_view_and_anchor(rng):
+    body = subject(rng)
+    cams = ring(3, rng, distance=10.0)              # far enough to look scaled orthographic
+    poses = [plausible_pose(body, rng) for _ in range(2)]
+    anchors = [Anchor(k, clicks(cams, body.joints(p), rng)) for k, p in enumerate(poses)]
+    result = init.initialize(anchors, {c.name: c for c in cams}, calibrated=False)
+    assert set(result.view_cameras) == {0, 1}
+    assert all(set(v) == {"cam0", "cam1", "cam2"} for v in result.view_cameras.values())
+    for k, pose in enumerate(poses):
+        assert init.procrustes_mpjpe(result.joints3d(k), body.joints(pose)) < 0.03
+    # the cameras see the body as the clicks do
+    assert max(result.rms.values()) < 2 * NOISE_PX
+
+
+def test_cmu_sample_take_is_fitted_approximately():
+    """The bundled walk3 sample: a CMU capture, whose skeleton is not the body model."""
+    from zoopraxis.core.calibfile import read_calibration
+    from zoopraxis.core.markers import read_markers
+    from zoopraxis.core.synth import read_truth
+
+    root = cli.__file__.replace("cli.py", "samples/walk3/")
+    anchors = read_markers(root + "markers.json")
+    truth = read_truth(root + "truth.json")["joints3d"]
+    result = init.initialize(anchors, read_calibration(root + "calibration.json"))
+    for a in anchors:
+        assert mpjpe(result.joints3d(a.frame), truth[a.frame]) < 0.03
+
+
+def test_fitted_angles_stay_within_limits(rng):
+    body = subject(rng)
+    pose = plausible_pose(body, rng)
+    pose.angles[body.dof_index("l_knee_flex")] = 0.0            # on its limit
+    pose.angles[body.dof_index("r_elbow_flex")] = body.upper[body.dof_index("r_elbow_flex")]
+    cams = ring(3, rng)
+    result = init.initialize([Anchor(0, clicks(cams, body.joints(pose), rng))],
+                             {c.name: c for c in cams})
+    angles = result.poses[0].angles
+    assert np.all(angles >= result.body.lower) and np.all(angles <= result.body.upper)
+    assert mpjpe(result.joints3d(0), body.joints(pose)) < 0.025
+
+
+def test_fixed_dims_are_kept(rng):
+    body = subject(rng)
+    cams = ring(3, rng)
+    X = body.joints(plausible_pose(body, rng))
+    result = init.initialize([Anchor(0, clicks(cams, X, rng))], {c.name: c for c in cams},
+                             dims=body.dims, fit_dims=False)
+    assert all(np.isclose(result.body.dims[n], body.dims[n]) for n in bm.LENGTH_DIMS)
+    assert mpjpe(result.joints3d(0), X) < 0.02
+
+
+# -- initialization: bad clicks and ambiguity ------------------------------------------------
+
+def test_swapped_knees_in_one_view_are_detected_and_named(rng):
+    body = subject(rng)
+    pose = plausible_pose(body, rng)
+    X = body.joints(pose)
+    cams = ring(3, rng)
+    views = clicks(cams, X, rng)
+    views["cam1"]["l_knee"], views["cam1"]["r_knee"] = views["cam1"]["r_knee"], \
+        views["cam1"]["l_knee"]
+    assert np.linalg.norm(np.subtract(views["cam1"]["l_knee"], views["cam1"]["r_knee"])) > 15
+    result = init.initialize([Anchor(0, views)], {c.name: c for c in cams})
+    assert result.swapped == [(0, "cam1", "l_knee", "r_knee")]
+    [warning] = [w for w in result.warnings if "swapped" in w]
+    assert warning.startswith("frame 0, view cam1: l_knee and r_knee look swapped")
+    # not absorbed: the pose is as good as with right clicks
+    assert mpjpe(result.joints3d(0), X) < 0.025
+
+
+def test_outlying_click_is_named_and_does_not_drag_the_fit(rng):
+    body = subject(rng)
+    X = body.joints(plausible_pose(body, rng))
+    cams = ring(3, rng)
+    views = clicks(cams, X, rng)
+    u, v = views["cam2"]["r_wrist"]
+    views["cam2"]["r_wrist"] = (u + 40.0, v - 30.0)
+    result = init.initialize([Anchor(0, views)], {c.name: c for c in cams})
+    assert any(w.startswith("frame 0, view cam2: r_wrist is") for w in result.warnings)
+    assert result.errors[0]["cam2"][JOINT_INDEX["r_wrist"]] > 40
+    assert mpjpe(result.joints3d(0), X) < 0.025
+
+
+def test_arm_pointing_along_the_view_is_reported_ambiguous(rng):
+    """Seen from the front by a scaled orthographic camera, a straight arm raised forwards
+    projects exactly like one raised backwards by the same angle (and the prior cannot tell
+    them apart): the fit must say so."""
+    body = bm.make_body("full")
+    angles = body.rest_pose().angles
+    angles[body.dof_index("l_shoulder_flex")] = np.radians(-45.0)
+    angles[body.dof_index("r_elbow_flex")] = np.radians(20.0)
+    X = body.joints(bm.Pose(se3.transform(p=[0.0, 0.0, 1.0]), angles))
+    from zoopraxis.core.camera import look_at
+    R, _ = look_at([0.0, -10.0, 1.0], [0.0, 0.0, 1.0])
+    cam = ScaledOrthoCamera("cam0", (1920, 1080), 430.0, R=R, t=[0.0, 0.0, 10.0])
+    result = init.initialize([Anchor(0, clicks([cam], X, rng, noise=0.5))], {"cam0": cam},
+                             calibrated=False)
+    assert result.ambiguous
+    # the other limbs may turn along with it: the report names every part that moves
+    assert any(w.startswith("frame 0: a pose with ") and "the left arm" in w
+               and "mirrored in depth fits about as well" in w for w in result.warnings)
+
+
+# -- initialization: bad input -------------------------------------------------------------------
+
+def test_bad_input_names_what_is_wrong(rng):
+    cams = {c.name: c for c in ring(2, rng)}
+    body = bm.make_body("full")
+    views = clicks(list(cams.values()), body.joints(body.rest_pose(se3.transform(
+        p=[0, 0, 1]))), rng)
+    with pytest.raises(ZoopraxisError, match="no anchor frames"):
+        init.initialize([], cams)
+    with pytest.raises(ZoopraxisError, match="frame 3: view 'cam9' has no camera"):
+        init.initialize([Anchor(3, {"cam9": views["cam0"]})], cams)
+    few = {"cam0": dict(list(views["cam0"].items())[:4])}
+    with pytest.raises(ZoopraxisError, match="frame 0: at most 4 joints clicked"):
+        init.initialize([Anchor(0, few)], cams)
+    with pytest.raises(ZoopraxisError, match="frame 0 has two anchors"):
+        init.initialize([Anchor(0, views), Anchor(0, views)], cams)
+    with pytest.raises(ZoopraxisError, match="unknown body template 'ful'"):
+        init.initialize([Anchor(0, views)], cams, template="ful")
+
+
+# -- model fine-tuning (§2.7) ------------------------------------------------------------------
+
+def test_refine_dims_recovers_true_dims_from_a_noisy_sequence(rng):
+    """Tracked 2D joints of 16 frames in 3 views, 2 px noise; poses and dims start off."""
+    truth = subject(rng)
+    cams = ring(3, rng)
+    poses = {f: plausible_pose(truth, rng) for f in range(16)}
+    obs = {f: {c.name: c.project(truth.joints(p)) + rng.normal(0, NOISE_PX, (17, 2))
+               for c in cams} for f, p in poses.items()}
+    obs[5]["cam0"][JOINT_INDEX["head"]] = np.nan              # a joint the tracker lost
+    start = {f: bm.Pose(se3.exp_se3(rng.normal(0, 0.02, 6)) @ p.root,
+                        p.angles + rng.normal(0, 0.05, p.angles.size)) for f, p in poses.items()}
+    result = init.refine_dims(bm.make_body("full"), start, obs, {c.name: c for c in cams})
+    for name in SEGMENTS:
+        assert abs(result.body.dims[name] / truth.dims[name] - 1) < 0.02, name
+    for name in ("hip_width", "shoulder_width"):                # short: 2 px is 1 % of them
+        assert abs(result.body.dims[name] / truth.dims[name] - 1) < 0.04, name
+    errors = [mpjpe(result.body.joints(result.poses[f]), truth.joints(p))
+              for f, p in poses.items()]
+    assert np.mean(errors) < 0.015
+    assert max(result.rms.values()) < 1.5 * NOISE_PX
+
+
+def test_refine_dims_weights_silence_bad_observations(rng):
+    """A tracker failure it knows about (weight 0) counts as unobserved; unweighted, the
+    robust loss bounds its pull but it still pulls."""
+    truth = subject(rng)
+    cams = {c.name: c for c in ring(2, rng)}
+    poses = {f: plausible_pose(truth, rng) for f in range(4)}
+    obs = {f: {n: c.project(truth.joints(p)) + rng.normal(0, NOISE_PX, (17, 2))
+               for n, c in cams.items()} for f, p in poses.items()}
+    obs[2]["cam1"][JOINT_INDEX["l_ankle"]] = np.nan
+    clean = init.refine_dims(truth, poses, obs, cams)
+    obs[2]["cam1"][JOINT_INDEX["l_ankle"]] = cams["cam1"].project(
+        truth.joints(poses[2])[JOINT_INDEX["l_ankle"]]) + 80.0
+    weights = {2: {"cam1": np.ones(17)}}
+    weights[2]["cam1"][JOINT_INDEX["l_ankle"]] = 0.0
+    silenced = init.refine_dims(truth, poses, obs, cams, weights=weights)
+    heard = init.refine_dims(truth, poses, obs, cams)
+    ankle = JOINT_INDEX["l_ankle"]
+
+    def ankle_moved(result):
+        return np.linalg.norm(result.body.joints(result.poses[2])[ankle]
+                              - clean.body.joints(clean.poses[2])[ankle])
+
+    assert ankle_moved(silenced) < 1e-5
+    assert ankle_moved(heard) > 1e-2
+
+
+def test_refine_dims_with_one_camera_per_frame_and_view(rng):
+    """Bregler & Malik's uncalibrated mode: the scaled orthographic cameras of every frame are
+    refined with the angles; the proportions come back (the size is the cameras' scale)."""
+    truth = subject(rng)
+    cams = ring(2, rng, distance=10.0)
+    poses = {f: plausible_pose(truth, rng) for f in range(6)}
+    cameras, obs = {}, {}
+    for f, pose in poses.items():
+        cameras[f] = {c.name: ScaledOrthoCamera(c.name, c.image_size, 200.0,
+                                                R=c.R @ pose.root[:3, :3], t=[0.0, 0.0, 10.0])
+                      for c in cams}
+        Y = truth.joints(bm.Pose(np.eye(4), pose.angles))
+        obs[f] = {n: c.project(Y) + rng.normal(0, NOISE_PX, (17, 2))
+                  for n, c in cameras[f].items()}
+    start = {f: bm.Pose(np.eye(4), p.angles + rng.normal(0, 0.05, p.angles.size))
+             for f, p in poses.items()}
+    result = init.refine_dims(bm.make_body("full"), start, obs, cameras)
+    ratio = np.array([result.body.dims[n] / truth.dims[n] for n in SEGMENTS])
+    assert np.abs(ratio / np.median(ratio) - 1).max() < 0.05
+    assert isinstance(result.cameras[3]["cam1"], ScaledOrthoCamera)
+    assert max(result.rms.values()) < 1.5 * NOISE_PX
+
+
+def test_refine_dims_bad_input(rng):
+    cams = {c.name: c for c in ring(1, rng)}
+    body = bm.make_body("full")
+    pose = body.rest_pose(se3.transform(p=[0, 0, 1]))
+    with pytest.raises(ZoopraxisError, match="frame 7 has observations but no pose"):
+        init.refine_dims(body, {0: pose}, {7: {"cam0": np.zeros((17, 2))}}, cams)
+    with pytest.raises(ZoopraxisError, match="frame 0, view cam0: observations must have"):
+        init.refine_dims(body, {0: pose}, {0: {"cam0": np.zeros((16, 2))}}, cams)
+    with pytest.raises(ZoopraxisError, match="view cam5 has no camera"):
+        init.refine_dims(body, {0: pose}, {0: {"cam5": np.zeros((17, 2))}}, cams)
+
+
+# -- init.json and the command line ------------------------------------------------------------
+
+def test_init_json_round_trip(rng):
+    body = subject(rng)
+    cams = ring(2, rng)
+    X = body.joints(plausible_pose(body, rng))
+    result = init.initialize([Anchor(4, clicks(cams, X, rng))], {c.name: c for c in cams})
+    data = json.loads(json.dumps(result.to_json()))
+    back = init.init_from_json(data)
+    assert np.allclose(back.joints3d(4), result.joints3d(4), atol=1e-4)
+    assert back.calibrated and back.rms.keys() == result.rms.keys()
+    with pytest.raises(ZoopraxisError, match="x.json: not a zoopraxis-init/1 file"):
+        init.init_from_json({"format": "other"}, "x.json")
+
+
+def test_init_command_writes_init_json(tmp_path, capsys):
+    root = cli.__file__.replace("cli.py", "samples/walk3/")
+    out = tmp_path / "init.json"
+    args = ["init", "--markers", root + "markers.json", "--calibration",
+            root + "calibration.json", "--out", str(out)]
+    args += [f"--plate=cam{i}={root}cam{i}" for i in range(3)]
+    assert cli.main(args) == 0
+    printed = capsys.readouterr().out
+    assert "body dimensions (m): hip_width" in printed and "rms per view (px): cam0" in printed
+    data = json.loads(out.read_text())
+    assert data["format"] == "zoopraxis-init/1" and [a["frame"] for a in data["anchors"]] == \
+        [0, 47]
+    assert cli.main(args) == 2                                # no overwrite without --force
+    assert "already exists" in capsys.readouterr().err
