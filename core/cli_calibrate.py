@@ -3,38 +3,17 @@
 import argparse
 from pathlib import Path
 
+from .cli_common import open_plates, parse_view_values
 from .errors import ZoopraxisError
 from .progress import ConsoleProgress
 
 
 def parse_plate_options(values):
-    """``--plate NAME=PATH`` options as an ordered dict of view name to path.
-
-    Raises
-    ------
-    ZoopraxisError
-        A value without ``=``, an empty name or path, or a view named twice.
-    """
-    plates = {}
-    for value in values or []:
-        name, sep, path = value.partition("=")
-        name, path = name.strip(), path.strip()
-        if not sep or not name or not path:
-            raise ZoopraxisError(f"--plate must be NAME=PATH (e.g. cam0=plates/cam0), got "
-                                 f"'{value}'")
-        if name in plates:
-            raise ZoopraxisError(f"--plate: view '{name}' is given twice")
-        plates[name] = path
-    if not plates:
+    """``--plate NAME=PATH`` options as an ordered dict of view name to path."""
+    paths = parse_view_values(values, "--plate")
+    if not paths:
         raise ZoopraxisError("give at least one --plate NAME=PATH")
-    return plates
-
-
-def open_plates(paths):
-    """Open the plates of ``parse_plate_options``; returns dict of view name to Plate."""
-    from .plates import open_plate
-
-    return {name: open_plate(path, name=name) for name, path in paths.items()}
+    return paths
 
 
 def build_parser():

@@ -31,7 +31,8 @@ def build_parser():
 def main(argv):
     from .body import LENGTH_DIMS, TEMPLATES
     from .calibfile import check_views, read_calibration
-    from .cli_calibrate import open_plates, parse_plate_options
+    from .cli_calibrate import parse_plate_options
+    from .cli_common import open_plates
     from .initialize import initialize
     from .markers import check_markers, read_markers
 

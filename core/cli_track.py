@@ -4,26 +4,11 @@ import argparse
 import time
 from pathlib import Path
 
+from .cli_common import open_plates, parse_view_values
 from .errors import ZoopraxisError
 from .progress import ConsoleProgress
 
 TRACKERS = ("differential", "particle", "hybrid")
-
-
-def parse_view_values(items, what, convert=str):
-    """``["cam0=PATH", ...]`` -> ordered dict; one-line errors for malformed items."""
-    out = {}
-    for item in items or []:
-        name, sep, value = item.partition("=")
-        if not sep or not name or not value:
-            raise ZoopraxisError(f"{what} must look like VIEW=VALUE, got '{item}'")
-        if name in out:
-            raise ZoopraxisError(f"view '{name}' is given twice in {what}")
-        try:
-            out[name] = convert(value)
-        except ValueError:
-            raise ZoopraxisError(f"{what} {item}: '{value}' is not valid") from None
-    return out
 
 
 def build_parser():
@@ -65,7 +50,7 @@ def main(argv):
     unknown = [v for v in offsets if v not in paths]
     if unknown:
         raise ZoopraxisError(f"--offset names view '{unknown[0]}', which has no --plate")
-    opened = {v: plates.open_plate(p, name=v, fps=args.fps) for v, p in paths.items()}
+    opened = open_plates(paths, fps=args.fps)
     n = plates.check_same_length(opened, offsets)
     frames = plates.parse_frame_range(args.frames, n)
     anchors = markers.read_markers(args.markers)
