@@ -201,17 +201,32 @@ class ZOOPRAXIS_OT_calibrate_board(JobOperator, bpy.types.Operator):
     label = "Calibrate"
 
     def prepare(self, context):
+        from ..core.calibrate import parse_board
         from . import pipeline
 
-        self._take = pipeline.gather(context, need_markers=False)
-        return lambda progress, cancel: pipeline.calibrate(self._take, progress=progress,
-                                                           cancel=cancel)
+        settings = context.scene.zoopraxis
+        board = parse_board(settings.board)
+        world_frame = settings.board_world_frame if settings.board_world_frame >= 0 else None
+        options = dict(step=settings.board_step, world_frame=world_frame,
+                       max_rms=settings.board_max_rms)
+        self._take = take = pipeline.gather(context, need_markers=False)
+        if world_frame is not None and world_frame not in take.frames:
+            raise ZoopraxisError(f"world frame {world_frame} is outside the take "
+                                 f"({take.frames.start}:{take.frames.stop})")
+        return lambda progress, cancel: pipeline.calibrate(take, board, progress=progress,
+                                                           cancel=cancel, **options)
 
-    def finish(self, context, cameras, cancelled):
+    def finish(self, context, result, cancelled):
         from .calibration import add_camera_objects
 
-        objects = add_camera_objects(context, cameras)
-        return f"Calibrated {len(objects)} camera(s) from the board"
+        objects = add_camera_objects(context, result.cameras)
+        for warning in result.warnings:
+            print(f"zoopraxis calibrate: warning: {warning}")
+        rms = ", ".join(f"{name} {result.rms[name]:.2f} px" for name in objects)
+        return (f"Calibrated {len(objects)} camera(s) from the board, world at frame "
+                f"{result.world_frame}; RMS {rms}"
+                + (f"; {len(result.warnings)} warning(s), see the console"
+                   if result.warnings else ""))
 
     def cleanup(self):
         take = getattr(self, "_take", None)

@@ -105,7 +105,15 @@ class VIEW3D_PT_zoopraxis(bpy.types.Panel):
         row = box.row(align=True)
         row.operator("zoopraxis.load_calibration", icon='IMPORT')
         row.operator("zoopraxis.export_calibration", text="", icon='EXPORT')
-        box.operator("zoopraxis.calibrate_board", icon='MESH_GRID')
+        col = box.column(align=True)
+        col.prop(settings, "board")
+        row = col.row(align=True)
+        row.prop(settings, "board_step")
+        row.prop(settings, "board_world_frame")
+        row.prop(settings, "board_max_rms")
+        sub = box.row()
+        sub.enabled = bool(settings.views) and not settings.running
+        sub.operator("zoopraxis.calibrate_board", icon='MESH_GRID')
 
         box = _step(layout, "3. Markers", 'TRACKER', missing["markers"])
         box.label(text="Place the joints in the Movie Clip Editor")
@@ -169,6 +177,7 @@ class CLIP_PT_zoopraxis_markers(bpy.types.Panel):
     def draw(self, context):
         settings = context.scene.zoopraxis
         layout = self.layout
+        layout.prop(settings, "show_fit_overlay")
         row = layout.row(align=True)
         row.operator("zoopraxis.add_joint_markers", icon='ADD')
         row.operator("zoopraxis.add_joint_markers", text="All Views").all_views = True

@@ -171,15 +171,44 @@ def track(take, *, init=None, progress=None, cancel=None, log=None):
                 **options)
 
 
-def calibrate(take, *, progress=None, cancel=None, log=None, **board):
-    """Calibrate the cameras from a board seen in the plates (:mod:`core.calibrate`).
+class _ShiftedPlate:
+    """A plate read in take frames: take frame ``f`` is plate frame ``f + offset``."""
+
+    def __init__(self, plate, offset, num_frames):
+        self.plate, self.offset, self.num_frames = plate, int(offset), int(num_frames)
+        self.name, self.image_size = plate.name, plate.image_size
+
+    def read(self, frame, **options):
+        return self.plate.read(int(frame) + self.offset, **options)
+
+
+def calibrate(take, board, *, step=1, world_frame=None, max_rms=None, progress=None,
+              cancel=None):
+    """Calibrate the cameras from a board seen in the plates (:func:`core.calibrate.calibrate`).
+
+    The board is searched in the take's frames (every ``step``-th); the views are read in take
+    frames, so their offsets line them up, and ``world_frame`` is a take frame too.
+
+    Parameters
+    ----------
+    take : Take
+    board : core.calibrate.Board
+        From :func:`core.calibrate.parse_board`.
+    step : int
+    world_frame : int, optional
+        Take frame whose board pose defines the world; default: the calibration's choice.
+    max_rms : float, optional
+        Refusal threshold of the reprojection RMS, pixels; default the core's.
 
     Returns
     -------
-    cameras : dict of str to PinholeCamera
+    result : core.calibrate.CalibrationResult
+        ``cameras`` and ``rms`` by view name, ``world_frame``, ``warnings``.
     """
     module = _import("calibrate", "board calibration")
-    function = getattr(module, "calibrate", None) or getattr(module, "calibrate_plates")
-    result = call(function, take.plates, offsets=take.offsets, progress=progress, cancel=cancel,
-                  log=log, **board)
-    return getattr(result, "cameras", result)
+    plates = {v: _ShiftedPlate(p, take.offsets.get(v, 0), take.num_frames)
+              for v, p in take.plates.items()}
+    options = dict(step=step, world_frame=world_frame, progress=progress, cancel=cancel)
+    if max_rms is not None:
+        options["max_rms"] = max_rms
+    return call(module.calibrate, plates, board, take.frames, **options)

@@ -25,6 +25,12 @@ def _view_changed(self, context):
     _sync_clip_start(context.scene.zoopraxis)
 
 
+def _redraw_clips(self, context):
+    for area in context.screen.areas if context.screen else ():
+        if area.type == 'CLIP_EDITOR':
+            area.tag_redraw()
+
+
 def _is_camera(self, obj):
     return obj.type == 'CAMERA'
 
@@ -64,6 +70,18 @@ class ZOOPRAXIS_PG_settings(bpy.types.PropertyGroup):
                              description="Scene frame of take frame 0")
 
     calibration_path: StringProperty(name="Calibration", subtype='FILE_PATH')
+    board: StringProperty(name="Board", default="checkerboard:9x6:0.04",
+                          description="checkerboard:COLSxROWS:SQUARE_M (inner corners, metres) "
+                                      "or charuco:COLSxROWS:SQUARE_M:MARKER_M[:DICT]")
+    board_step: IntProperty(name="Step", default=1, min=1,
+                            description="Search the board in every n-th take frame")
+    board_world_frame: IntProperty(name="World Frame", default=-1, min=-1,
+                                   description="Take frame whose board lies on the floor and "
+                                               "defines the world (-1: the one most cameras "
+                                               "see)")
+    board_max_rms: FloatProperty(name="Max RMS", default=1.0, min=0.01, subtype='PIXEL',
+                                 description="Refuse a calibration whose reprojection error "
+                                             "is above this, pixels")
     markers_path: StringProperty(name="Markers", subtype='FILE_PATH')
     result_path: StringProperty(name="Result", subtype='FILE_PATH',
                                 description="result.json of the last track, or one to bake")
@@ -88,6 +106,9 @@ class ZOOPRAXIS_PG_settings(bpy.types.PropertyGroup):
     preset: EnumProperty(name="Naming", items=PRESETS, default='MIXAMO')
     bone_map: CollectionProperty(type=ZOOPRAXIS_PG_bone_pair)
     active_bone_pair: IntProperty()
+    show_fit_overlay: BoolProperty(name="Show Fit", default=True, update=_redraw_clips,
+                                   description="Draw the tracked joints of the last result "
+                                               "over the plates in the Movie Clip Editor")
     body_mesh: BoolProperty(name="Body Mesh", default=True,
                             description="Bind the volumetric body to the baked armature")
 

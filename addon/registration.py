@@ -12,7 +12,7 @@ import bpy
 
 from . import preferences
 
-MODULES = ("props", "operators", "panels")
+MODULES = ("props", "operators", "panels", "overlay")
 
 CLI_COMMAND = "zoopraxis"
 

@@ -157,6 +157,53 @@ def geman_mcclure_weights(r, scale):
     return (s2 / (r * r + s2)) ** 2
 
 
+class _Pullback:
+    """Maps image gradients (N, 2) to world gradients (N, 3) through the projection:
+    ``grad^T d uv / d X``, without forming the (N, 2, 3) Jacobians where the camera model
+    allows (the common distortion-free pinhole and scaled orthographic cases)."""
+
+    def __init__(self, fn, depth):
+        self.fn = fn
+        self.depth = depth
+
+    def __call__(self, grad):
+        return self.fn(grad)
+
+
+def _projection(camera, X):
+    """Pixels of world points and the pull-back of image gradients to world gradients.
+
+    Convention: world to OpenCV pixels through the camera's own model; for a pinhole without
+    distortion ``d uv / d X = K_2x2 [[1/z, 0, -x/z^2], [0, 1/z, -y/z^2]] R``.
+    """
+    R = camera.R
+    Xc = X @ R.T + camera.t
+    if hasattr(camera, "K") and not getattr(camera, "has_distortion", True):
+        K = camera.K
+        z = Xc[:, 2]
+        inv_z = 1.0 / np.where(np.abs(z) < 1e-12, 1e-12, z)
+        x, y = Xc[:, 0] * inv_z, Xc[:, 1] * inv_z
+        uv = np.column_stack([K[0, 0] * x + K[0, 1] * y + K[0, 2], K[1, 1] * y + K[1, 2]])
+
+        def pull(grad):
+            gu = grad[:, 0] * K[0, 0]
+            gv = grad[:, 0] * K[0, 1] + grad[:, 1] * K[1, 1]
+            gc = np.column_stack([gu * inv_z, gv * inv_z, -(gu * x + gv * y) * inv_z])
+            return gc @ R
+
+        return uv, _Pullback(pull, z)
+    if not hasattr(camera, "K"):
+        s = camera.s
+        uv = s * Xc[:, :2] + camera.c
+
+        def pull(grad):
+            return (s * grad) @ R[:2]
+
+        return uv, _Pullback(pull, Xc[:, 2])
+    uv, Jp = camera.project_jacobian(X)
+    return uv, _Pullback(lambda grad: np.einsum("ni,nij->nj", grad, Jp), Xc[:, 2])
+
+
 @dataclass
 class Accumulated:
     """Normal equations of one term, per segment.
@@ -205,10 +252,10 @@ def accumulate(term, stack, camera, seg2world, n_segments, *, with_scale=False, 
     Accumulated
     """
     X = se3.apply(seg2world[term.segment], term.ref_points)
-    uv, Jp = camera.project_jacobian(X)
+    uv, pullback = _projection(camera, X)
     vals, inside = sample(stack, uv)
     if hasattr(camera, "K"):
-        inside &= camera.depth(X) > 1e-3
+        inside &= pullback.depth > 1e-3
     r = (vals[:, 0] - term.target).astype(np.float64)
     grad = vals[:, 1:3].astype(np.float64)
     if term.hinge is not None:
@@ -223,7 +270,7 @@ def accumulate(term, stack, camera, seg2world, n_segments, *, with_scale=False, 
     if robust:
         w = w * geman_mcclure_weights(r, term.scale)
     # g = grad^T dpi/dX [I | -X^]: the row of the linear system in twist coordinates
-    gp = np.einsum("ni,nij->nj", grad, Jp)                     # (N, 3) = dI/dX
+    gp = pullback(grad)                                        # (N, 3) = dI/dX
     g = np.empty((len(r), 7))
     g[:, :3] = gp
     g[:, 3:6] = np.cross(X, gp)                                # -X^ applied, transposed

@@ -126,3 +126,19 @@ def test_hinge_terms_only_count_outside(rng):
 def test_geman_mcclure_downweights_outliers():
     w = im.geman_mcclure_weights(np.array([0.0, 0.1, 1.0]), 0.1)
     assert w[0] == 1.0 and 0 < w[2] < w[1] < 1
+
+
+@pytest.mark.parametrize("model", ["pinhole", "ortho", "distorted"])
+def test_gradient_pullback_equals_projection_jacobian(rng, model):
+    R, t = look_at([0.3, -3.0, 1.0], [0, 0, 0.8])
+    K = [[150, 0.5, 79.5], [0, 140, 59.5], [0, 0, 1]]
+    cam = {"pinhole": PinholeCamera("c", (160, 120), K, R=R, t=t),
+           "ortho": ScaledOrthoCamera("o", (160, 120), s=50.0, R=R, t=t),
+           "distorted": PinholeCamera("d", (160, 120), K, dist=[-0.1, 0.01, 1e-3, 0, 0], R=R,
+                                      t=t)}[model]
+    X = rng.normal(0, 0.3, (50, 3)) + [0, 0, 0.9]
+    grad = rng.normal(size=(50, 2))
+    uv, pull = im._projection(cam, X)
+    uv_ref, J = cam.project_jacobian(X)
+    assert np.allclose(uv, uv_ref)
+    assert np.allclose(pull(grad), np.einsum("ni,nij->nj", grad, J))
