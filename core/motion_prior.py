@@ -21,9 +21,10 @@ Both share one interface, used by :mod:`particle`::
 A state is a dict of arrays whose first axis is the particle; the filter resamples it by indexing
 every array with the same index array.
 
-Converting motion capture into this body's angles (:func:`fit_pose`, :func:`fit_body`) lives here
-too: it is how the walking model's training data are made (``tools/learn_walk_prior.py``), and how
-tests start a tracker from a ground-truth pose.
+Converting motion capture into this body's angles (how the walking model's training data are
+made, ``tools/learn_walk_prior.py``, and how tests start a tracker from a ground-truth pose) is
+:mod:`fit3d`'s: :func:`fit3d.fit_pose`, :func:`fit3d.fit_body` and :func:`fit3d.root_from_joints`
+are re-exported here for those callers.
 
 Convention: world Z up, metres. Pose parameters are ordered as :func:`param_names` gives them:
 pelvis position ``tx, ty, tz`` (world), root rotation ``rx, ry, rz`` (a rotation vector applied
@@ -37,8 +38,9 @@ from pathlib import Path
 import numpy as np
 
 from . import se3
-from .body import LENGTH_DIMS, Pose, mirror_dof_index
+from .body import mirror_dof_index
 from .errors import ZoopraxisError
+from .fit3d import fit_body, fit_pose, root_from_joints
 from .joints import JOINT_INDEX
 
 ROOT_PARAMS = ("tx", "ty", "tz", "rx", "ry", "rz")
@@ -72,213 +74,6 @@ def param_index(body, names):
 
 def _take_rows(state, index):
     return {k: v[index] for k, v in state.items()}
-
-
-# ---------------------------------------------------------------------------------------------
-# Fitting this body to 3D joints (motion capture)
-# ---------------------------------------------------------------------------------------------
-
-
-def root_from_joints(joints):
-    """A root transform from standard joints: pelvis position, hips give left, spine gives up.
-
-    Parameters
-    ----------
-    joints : array, shape (17, 3)
-
-    Returns
-    -------
-    world_from_pelvis : array, shape (4, 4)
-        Reference axes (body module convention): x to the subject's left, z up the spine,
-        y = z x x (backwards), so the body faces -y.
-    """
-    J = np.asarray(joints, float)
-    x = J[JOINT_INDEX["l_hip"]] - J[JOINT_INDEX["r_hip"]]
-    z = J[JOINT_INDEX["neck"]] - J[JOINT_INDEX["pelvis"]]
-    x = x / np.linalg.norm(x)
-    z = z - (z @ x) * x
-    z = z / np.linalg.norm(z)
-    return se3.transform(np.column_stack([x, np.cross(z, x), z]), J[JOINT_INDEX["pelvis"]])
-
-
-def fit_pose(body, joints, pose=None, *, weights=None, prior_weight=1e-5, iterations=60,
-             tol=1e-8):
-    """Least-squares fit of a pose to 3D standard joints (Levenberg-Marquardt).
-
-    Minimizes ``sum_j w_j |X_j(pose) - Y_j|^2 + prior_weight * |angles - angles_0|^2`` over
-    the root and the angles with ``body.joints_jacobian``; angles stay inside the joint limits.
-    The small pull towards the starting angles settles what the joints leave free (the twist of
-    a straight arm).
-
-    Parameters
-    ----------
-    body : BodyModel
-    joints : array, shape (17, 3)
-        Target standard joints, world metres; NaN rows are ignored.
-    pose : Pose, optional
-        Starting pose (and the angles pulled towards); by default the rest pose at
-        :func:`root_from_joints`.
-    weights : array, shape (17,), optional
-    prior_weight : float
-        Weight of the pull towards the starting angles, m^2 per rad^2.
-
-    Returns
-    -------
-    pose : Pose
-    rms : float
-        Root-mean-square joint distance of the fit, metres.
-    """
-    Y = np.asarray(joints, float)
-    if Y.shape != (17, 3):
-        raise ZoopraxisError(f"fit_pose: joints must have shape (17, 3), got {Y.shape}")
-    w = np.ones(17) if weights is None else np.asarray(weights, float).copy()
-    known = np.all(np.isfinite(Y), axis=1)
-    if known.sum() < 4:
-        raise ZoopraxisError(f"fit_pose: only {known.sum()} of 17 joints are known; need 4")
-    w[~known] = 0.0
-    Y = np.where(known[:, None], Y, 0.0)
-    if pose is None:
-        pose = body.rest_pose(root_from_joints(np.where(known[:, None], Y, np.nan))
-                              if known[[JOINT_INDEX[n] for n in ("l_hip", "r_hip", "neck",
-                                                                  "pelvis")]].all()
-                              else None)
-    pose = Pose(pose.root.copy(), body.clamp(pose.angles))
-    anchor = pose.angles.copy()
-    sw = np.repeat(np.sqrt(w), 3)
-    n = body.n_dofs
-
-    def cost(p):
-        r = (body.joints(p) - Y).ravel() * sw
-        return r @ r + prior_weight * np.sum((p.angles - anchor) ** 2)
-
-    current = cost(pose)
-    lam = 1e-3
-    for _ in range(iterations):
-        X, J = body.joints_jacobian(pose)
-        r = (X - Y).ravel() * sw
-        A = J.reshape(51, -1) * sw[:, None]
-        H = A.T @ A
-        g = A.T @ r
-        H[6:, 6:] += prior_weight * np.eye(n)
-        g[6:] += prior_weight * (pose.angles - anchor)
-        improved = False
-        for _ in range(10):
-            step = np.linalg.solve(H + lam * np.diag(np.diag(H) + 1e-9), -g)
-            trial = pose.retract(step)
-            trial.angles = body.clamp(trial.angles)
-            c = cost(trial)
-            if c < current:
-                improved = True
-                lam = max(lam / 3.0, 1e-9)
-                decrease = current - c
-                pose, current = trial, c
-                break
-            lam *= 4.0
-        if not improved or decrease < tol * max(current, 1e-12):
-            break
-    rms = float(np.sqrt(np.sum(w[:, None] * (body.joints(pose) - Y) ** 2) / max(w.sum(), 1e-12)))
-    return pose, rms
-
-
-def fit_body(body, joints, *, iterations=20, dims=None, ridge=1e-4, prior_weight=1e-5):
-    """Fit body lengths and per-frame poses to a sequence of 3D standard joints.
-
-    Every frame's pose starts from :func:`fit_pose` (each frame from the previous one); then
-    Gauss-Newton steps refine the lengths and all poses together. At fixed angles the joints
-    are linear in the lengths (``body.joints_dims_jacobian``), and each pose only touches its
-    own frame, so the normal equations are block-diagonal in the poses: the shared lengths
-    are solved on their Schur complement, then each pose on its own block. A ridge towards
-    the starting lengths keeps lengths no joint measures (a template's spine) where they are;
-    a length driven below a fifth of its start is held there.
-
-    Parameters
-    ----------
-    body : BodyModel
-    joints : array, shape (F, 17, 3)
-        NaN rows (unknown joints) are ignored.
-    iterations : int
-        Gauss-Newton steps over lengths and poses together.
-    dims : sequence of str, optional
-        Length names to fit; default all of ``body.LENGTH_DIMS``.
-    ridge : float
-        Weight of the pull towards the starting lengths, per frame (m^2 per m^2).
-    prior_weight : float
-        Pull of the angles towards their starting values (see :func:`fit_pose`).
-
-    Returns
-    -------
-    body : BodyModel
-        With the fitted lengths (radii unchanged).
-    poses : list of Pose, length F
-    rms : array, shape (F,)
-        Joint RMS per frame, metres.
-    """
-    Y = np.asarray(joints, float)
-    if Y.ndim != 3 or Y.shape[1:] != (17, 3):
-        raise ZoopraxisError(f"fit_body: joints must have shape (F, 17, 3), got {Y.shape}")
-    names = tuple(LENGTH_DIMS if dims is None else dims)
-    d_start = body.dims_vector(names)
-    floor = 0.2 * d_start
-    known = np.all(np.isfinite(Y), axis=2)                             # (F, 17)
-    Y = np.where(known[..., None], Y, 0.0)
-    poses, prev = [], None
-    for frame in np.where(known[..., None], Y, np.nan):
-        prev, _ = fit_pose(body, frame, prev, prior_weight=prior_weight)
-        poses.append(prev)
-    anchors = [p.angles.copy() for p in poses]
-    n, D, F = body.n_dofs, len(names), len(Y)
-
-    def residuals(b, ps):
-        return [((b.joints(p) - Y[f]) * known[f, :, None]).ravel() for f, p in enumerate(ps)]
-
-    def cost(b, ps):
-        r = residuals(b, ps)
-        return sum(x @ x for x in r) + prior_weight * sum(
-            np.sum((p.angles - a) ** 2) for p, a in zip(ps, anchors)) + ridge * F * np.sum(
-            (b.dims_vector(names) - d_start) ** 2)
-
-    current = cost(body, poses)
-    lam = 1e-4
-    for _ in range(iterations):
-        d = body.dims_vector(names)
-        H_dd = ridge * F * np.eye(D)
-        g_d = ridge * F * (d - d_start)
-        blocks = []
-        for f, pose in enumerate(poses):
-            w = np.repeat(known[f], 3)[:, None]
-            X, Jp = body.joints_jacobian(pose)
-            A = Jp.reshape(51, -1) * w
-            B = body.joints_dims_jacobian(pose, names).reshape(51, D) * w
-            r = ((X - Y[f]) * known[f, :, None]).ravel()
-            H_pp = A.T @ A
-            H_pp[6:, 6:] += prior_weight * np.eye(n)
-            H_pp += lam * np.diag(np.diag(H_pp) + 1e-9)
-            g_p = A.T @ r
-            g_p[6:] += prior_weight * (pose.angles - anchors[f])
-            H_pd = A.T @ B
-            solve = np.linalg.solve(H_pp, np.column_stack([H_pd, g_p]))
-            H_dd += B.T @ B - H_pd.T @ solve[:, :D]
-            g_d += B.T @ r - H_pd.T @ solve[:, D]
-            blocks.append((solve, g_p))
-        step_d = np.linalg.solve(H_dd + lam * np.diag(np.diag(H_dd)), -g_d)
-        trial_body = body.with_dims(dict(zip(names, np.maximum(d + step_d, floor))))
-        trial_poses = []
-        for pose, (solve, _) in zip(poses, blocks):
-            moved = pose.retract(-(solve[:, D] + solve[:, :D] @ step_d))
-            moved.angles = body.clamp(moved.angles)
-            trial_poses.append(moved)
-        trial = cost(trial_body, trial_poses)
-        if trial < current:
-            decrease = current - trial
-            body, poses, current = trial_body, trial_poses, trial
-            lam = max(lam / 3.0, 1e-9)
-            if decrease < 1e-10 * max(current, 1e-12):
-                break
-        else:
-            lam *= 10.0
-    rms = np.array([np.sqrt(np.sum(r ** 2) / max(3 * known[f].sum(), 1))
-                    for f, r in enumerate(residuals(body, poses))])
-    return body, poses, rms
 
 
 # ---------------------------------------------------------------------------------------------
@@ -353,7 +148,7 @@ class SmoothMotionPrior:
             raise ZoopraxisError(f"SmoothMotionPrior: {what} must be finite and >= 0")
         return s
 
-    def init_state(self, pose, n, rng, *, spread=None, uniform=None):
+    def init_state(self, pose, n, rng, *, spread=None, uniform=None, previous=None):
         """Particles around a pose.
 
         Parameters
@@ -369,6 +164,9 @@ class SmoothMotionPrior:
             Parameters drawn uniformly from ``(low, high)`` instead (the arm example's unknown
             upper-arm twist): absolute values for joint angles (clipped to the limits),
             offsets from the pose for the root parameters.
+        previous : Pose, optional
+            The pose one frame earlier: velocities start at the motion from it to ``pose``
+            (active parameters only) instead of at zero, both with ``sigma_velocity`` noise.
 
         Returns
         -------
@@ -389,6 +187,12 @@ class SmoothMotionPrior:
             x[:, i] = rng.uniform(lo, hi, size=n)
         angles = body.clamp(x[:, 6:])
         v = rng.normal(size=(n, P)) * self.sigma_velocity
+        if previous is not None:
+            # Left increments in world axes, as propagate() applies them: R <- exp(dr) @ R.
+            motion = np.concatenate([pose.root[:3, 3] - previous.root[:3, 3],
+                                     se3.log_so3(pose.root[:3, :3] @ previous.root[:3, :3].T),
+                                     pose.angles - previous.angles])
+            v += np.where(self.active, motion, 0.0)
         return {"t": pose.root[:3, 3] + x[:, :3],
                 "R": se3.exp_so3(x[:, 3:6]) @ pose.root[:3, :3],
                 "angles": angles, "dt": v[:, :3], "dr": v[:, 3:6], "dangles": v[:, 6:]}

@@ -401,6 +401,63 @@ class ParticleFilter:
         self.pose, spread = posterior_mean(roots, angles, w)
         return self._report(roots, angles, ll, float(w @ result.inliers), spread)
 
+    def score(self, roots, angles):
+        """Log-likelihood of given poses in the last frame :meth:`step` weighed, with the
+        same appearance as its particles (not tempered).
+
+        Parameters
+        ----------
+        roots : array, shape (K, 4, 4)
+        angles : array, shape (K, n_dofs)
+
+        Returns
+        -------
+        log_likelihood : array, shape (K,)
+        """
+        if self._frame < 1:
+            raise ZoopraxisError("ParticleFilter: score() needs a frame weighed by step()")
+        seg2world = self.kinematics.seg2world(np.asarray(roots, float),
+                                              np.asarray(angles, float))
+        return self.likelihood.evaluate(self._images, seg2world).log_likelihood
+
+    def recentre(self, pose, fraction=0.5, **init_options):
+        """Draw a share of the particles again around a pose found by other means.
+
+        The hybrid tracker refines the filter's expected pose by Gauss-Newton on the image
+        (Bregler & Malik's differential tracker behind the filter as a coarse search stage).
+        Feeding the refined pose back keeps the two on one track: the posterior is resampled
+        to equal weights, ``fraction`` of the particles (chosen at random) are replaced by
+        fresh ones from ``prior.init_state`` around ``pose``, and ``pose`` becomes the
+        estimate on which the next frame's appearance is mapped (eq. 2).
+
+        Parameters
+        ----------
+        pose : Pose
+        fraction : float
+            Share of the particles to draw again, 0 to 1.
+        **init_options
+            Passed to ``prior.init_state`` (``spread``, ``previous``, ...).
+        """
+        if self._images is None:
+            raise ZoopraxisError("ParticleFilter: call start() with the first frame first")
+        if not 0 <= fraction <= 1:
+            raise ZoopraxisError(f"ParticleFilter: recentre fraction must be in [0, 1], "
+                                 f"got {fraction}")
+        N = self.n_particles
+        index = systematic_resample(self.weights, self.rng)
+        state = {k: v[index] for k, v in self.state.items()}
+        m = int(round(fraction * N))
+        if m:
+            rows = self.rng.choice(N, m, replace=False)
+            fresh = self.prior.init_state(pose, m, self.rng, **init_options)
+            for k in state:
+                state[k][rows] = fresh[k]
+        roots, angles = self.prior.poses(state)
+        self.state = state
+        self._seg2world = self.kinematics.seg2world(roots, angles)
+        self.weights = np.full(N, 1.0 / N)
+        self.pose = Pose(np.array(pose.root, float), np.array(pose.angles, float))
+
     def _report(self, roots, angles, ll, inliers, spread):
         w = self.weights
         X = self.kinematics.joints(self._seg2world)                   # (N, 17, 3)

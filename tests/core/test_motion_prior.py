@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
+from zoopraxis.core import fit3d, se3
 from zoopraxis.core import motion_prior as mp
-from zoopraxis.core import se3
 from zoopraxis.core.body import Pose, make_body
 from zoopraxis.core.errors import ZoopraxisError
 from zoopraxis.core.joints import JOINT_INDEX
@@ -40,35 +40,51 @@ def test_param_index_names_the_unknown_parameter(body):
         mp.param_index(body, ["l_wrist_flex"])
 
 
-# -- fitting the body to joints -----------------------------------------------------------------
+# -- fitting the body to joints (core.fit3d, re-exported for the walking prior's training) --------
+
+
+def test_fitting_is_fit3d_s(body):
+    assert mp.fit_pose is fit3d.fit_pose and mp.fit_body is fit3d.fit_body
+    assert mp.root_from_joints is fit3d.root_from_joints
 
 
 def test_root_from_joints_faces_minus_y_at_rest(body):
-    root = mp.root_from_joints(body.joints(body.rest_pose()))
+    root = fit3d.root_from_joints(body.joints(body.rest_pose()))
     np.testing.assert_allclose(root, np.eye(4), atol=1e-12)
 
 
 def test_fit_pose_recovers_a_known_pose(body, rng):
     for _ in range(3):
         truth = random_pose(body, rng)
-        pose, rms = mp.fit_pose(body, body.joints(truth))
+        pose, rms = fit3d.fit_pose(body, body.joints(truth))
         assert rms < 1e-3
         np.testing.assert_allclose(body.joints(pose), body.joints(truth), atol=3e-3)
+
+
+def test_fit_pose_from_the_previous_frame_follows_a_motion(body, rng):
+    truth = random_pose(body, rng, 0.3)
+    pose, _ = fit3d.fit_pose(body, body.joints(truth))
+    moved = Pose(se3.exp_se3([0.05, 0.0, 0.02, 0.0, 0.0, 0.1]) @ truth.root,
+                 body.clamp(truth.angles + 0.05))
+    again, rms = fit3d.fit_pose(body, body.joints(moved), pose)
+    assert rms < 1e-3
 
 
 def test_fit_pose_ignores_unknown_joints(body, rng):
     truth = random_pose(body, rng)
     joints = body.joints(truth)
     joints[JOINT_INDEX["head"]] = np.nan
-    pose, rms = mp.fit_pose(body, joints)
+    pose, rms = fit3d.fit_pose(body, joints)
     assert rms < 1e-3
 
 
 def test_fit_pose_refuses_bad_joints(body):
     with pytest.raises(ZoopraxisError, match=r"shape \(17, 3\)"):
-        mp.fit_pose(body, np.zeros((16, 3)))
+        fit3d.fit_pose(body, np.zeros((16, 3)))
     with pytest.raises(ZoopraxisError, match="only 2 of 17 joints"):
-        mp.fit_pose(body, np.r_[np.zeros((2, 3)), np.full((15, 3), np.nan)])
+        fit3d.fit_pose(body, np.r_[np.zeros((2, 3)), np.full((15, 3), np.nan)])
+    with pytest.raises(ZoopraxisError, match=r"fit_body: joints must have shape \(F, 17, 3\)"):
+        fit3d.fit_body(body, np.zeros((17, 3)))
 
 
 def test_fit_body_recovers_limb_lengths(body, rng):
@@ -77,7 +93,7 @@ def test_fit_body_recovers_limb_lengths(body, rng):
     truth = body.with_dims(lengths)
     poses = [random_pose(body, rng, 0.3) for _ in range(4)]
     joints = np.array([truth.joints(p) for p in poses])
-    fitted, fitted_poses, rms = mp.fit_body(body, joints)
+    fitted, fitted_poses, rms = fit3d.fit_body(body, joints)
     assert rms.max() < 3e-3
     for name, value in lengths.items():
         assert abs(fitted.dims[name] - value) < 5e-3, name

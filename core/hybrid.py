@@ -1,0 +1,517 @@
+"""Particle filter and hybrid trackers over a take: plates and markers in, a TrackResult out.
+
+Bregler & Malik's differential tracker converges from a close enough start, but "may be expected
+to fail when the motion from frame to frame is very large"; they propose to put "an initial
+coarse search stage" in front of it (§5). Sidenbladh, Black & Fleet's particle filter is such a
+search: it draws poses from a temporal prior and weighs them by the image (§4.1), so it follows
+motions beyond the basin of a Gauss-Newton step; but a few thousand samples in 35 dimensions
+land centimetres from the likelihood's peak, and its expected pose drifts. The two trackers:
+
+- ``particle``: the particle filter alone (:class:`particle.ParticleFilter`, smooth-motion prior
+  §6.1 by default), one filter step per frame; the expected pose is the answer and the
+  posterior's spread its uncertainty.
+- ``hybrid``: the coarse search, then the refinement, every frame:
+
+  1. the filter steps, its prior drawn ``spread`` times wider than alone (precision is the
+     refinement's job), and proposes its expected pose;
+  2. a partitioned search (:func:`partitioned_search`) moves the proposal one limb at a time to
+     the best of a few hundred draws under the filter's likelihood: the likelihood is a product
+     over limbs (eq. 12), so each limb is found in its own few dimensions, where the filter's
+     joint draws over all 35 rarely get every limb right at once;
+  3. the differential tracker refines from there (:class:`GuidedTracker`), its weak pull
+     towards the prediction still aimed at its own constant-velocity prediction, so that what
+     the images hardly see (the pelvis inside the body, depth) stays smooth;
+  4. the refined pose goes back into the filter (:meth:`particle.ParticleFilter.recentre`: a
+     share of the particles is drawn again around it, with its velocity, and it becomes the
+     estimate the next appearance is mapped on, eq. 2), so the search and the refinement follow
+     one track.
+
+The take runs from anchor to anchor as in :func:`track.track` (forward and backward passes
+between anchors, blended; backward before the first anchor, forward after the last), with the
+same working resolution, background model, silhouette status and result layout. Both trackers
+need calibrated cameras: the filter's likelihood projects through perspective cameras.
+"""
+
+import dataclasses
+
+import cv2
+import numpy as np
+
+from . import se3
+from .background import estimate_background, model_coverage, silhouette_iou
+from .body import Pose
+from .differential import DifferentialTracker, Settings, State, StepReport, prepare_images
+from .errors import ZoopraxisError
+from .image_motion import accumulate
+from .markers import check_markers
+from .motion_prior import SmoothMotionPrior, WalkingPrior, smooth_sigmas
+from .particle import ParticleFilter
+from .plates import to_gray_float
+from .track import (MIN_ANCHOR_FIT, Cancelled, FrameSource, Initial, _blend_report,
+                    _blend_states, _make_result)
+
+TRACKERS = ("particle", "hybrid")
+PRIORS = ("smooth", "walk")
+
+# Share of the filter's particles drawn again around the refined pose after each hybrid step:
+# enough that the refinement steers the search, few enough that the filter keeps hypotheses the
+# refinement did not take.
+RECENTRE = 0.5
+
+# The hybrid's filter draws the smooth-motion prior's position noise this many times wider than
+# the filter alone: the refinement brings the precision, the search must reach the limb that
+# moved furthest (on fast walking, 2 to 4 times track alike, 1 worse).
+SEARCH_SPREAD = 3.0
+
+
+class GuidedTracker(DifferentialTracker):
+    """The differential tracker, started from a proposal instead of its own prediction.
+
+    Set :attr:`proposal` (a :class:`differential.State`) before :meth:`step`: the Gauss-Newton
+    iterations start there. The step's weak pull towards its prediction (``prior_weight``,
+    decisive only for what the images do not determine) goes to :attr:`centre` when that is
+    set, else to the proposal. Without a proposal the tracker predicts by constant velocity, as
+    the base class does.
+    """
+
+    proposal = None
+    centre = None
+
+    def predict(self, state, previous=None):
+        if self.proposal is not None:
+            return self.proposal.copy()
+        return super().predict(state, previous)
+
+    def _difference(self, target, state):
+        # step() pulls towards its prediction through this difference only.
+        return super()._difference(target if self.centre is None else self.centre, state)
+
+
+# Search widths per frame at 30 fps (standard deviations): pelvis position (m), root rotation,
+# trunk and neck angles, leg angles, arm angles (rad). About the largest frame-to-frame change
+# of each in the CMU jumps and brisk walk, beyond the constant-velocity prediction.
+SEARCH_WIDTHS = {"root": (0.03, 0.06), "trunk": 0.08, "leg": 0.15, "arm": 0.2}
+
+
+def search_groups(body, fps=30.0):
+    """Pose parameters searched together, and their search widths.
+
+    Parameters
+    ----------
+    body : BodyModel
+    fps : float
+        Frame rate of the plates (widths scale with the time between frames).
+
+    Returns
+    -------
+    groups : list of (array of int, array of float)
+        Parameter indices (ordered as :func:`motion_prior.param_names`) and their standard
+        deviations per frame: the root, the trunk and head, then each leg and each arm, parents
+        before children.
+    """
+    k = 30.0 / fps
+    position, rotation = SEARCH_WIDTHS["root"]
+    groups = [(np.arange(6), k * np.array([position] * 3 + [rotation] * 3))]
+    parts = [(("lumbar", "thorax", "neck"), SEARCH_WIDTHS["trunk"])]
+    for side in "lr":
+        parts.append(((f"{side}_hip", f"{side}_knee", f"{side}_ankle"), SEARCH_WIDTHS["leg"]))
+    for side in "lr":
+        parts.append(((f"{side}_shoulder", f"{side}_elbow"), SEARCH_WIDTHS["arm"]))
+    for prefixes, width in parts:
+        cols = [6 + i for i, name in enumerate(body.dof_names) if name.startswith(prefixes)]
+        if cols:
+            groups.append((np.array(cols), np.full(len(cols), k * width)))
+    return groups
+
+
+def partitioned_search(pf, pose, groups, n, rng):
+    """Move a pose one group of parameters at a time to the best of ``n`` draws.
+
+    Partitioned sampling (MacCormick & Isard): the likelihood multiplies over limbs (eq. 12),
+    so one limb can be searched with the rest of the body held. For each group in turn, ``n``
+    poses are drawn around the current one in that group's parameters only (the current pose
+    is the first draw), weighed by the filter's likelihood
+    (:meth:`particle.ParticleFilter.score`), and the best is kept. A few hundred draws in four
+    dimensions find a limb that a few thousand in 35 miss.
+
+    Parameters
+    ----------
+    pf : ParticleFilter
+        After :meth:`~particle.ParticleFilter.step` on the frame searched.
+    pose : Pose
+        Where the search starts (the filter's expected pose).
+    groups : list of (array of int, array of float)
+        From :func:`search_groups`.
+    n : int
+        Draws per group.
+    rng : numpy.random.Generator
+
+    Returns
+    -------
+    Pose
+    """
+    body = pf.body
+    root, angles = np.array(pose.root, float), np.array(pose.angles, float)
+    for cols, width in groups:
+        delta = np.zeros((n, 6 + body.n_dofs))
+        delta[1:, cols] = rng.normal(size=(n - 1, len(cols))) * width
+        roots = np.repeat(root[None], n, axis=0)
+        roots[:, :3, 3] += delta[:, :3]
+        # Rotation increments on the left, in world axes (motion_prior's convention).
+        roots[:, :3, :3] = se3.exp_so3(delta[:, 3:6]) @ root[:3, :3]
+        trial = body.clamp(angles + delta[:, 6:])
+        best = int(np.argmax(pf.score(roots, trial)))
+        root, angles = roots[best], trial[best]
+    return Pose(root, angles)
+
+
+def _worse(a, b):
+    order = ("ok", "uncertain", "lost")
+    return order[max(order.index(a), order.index(b))]
+
+
+def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, seed=2345,
+          frames=None, offsets=None, template="full", max_size=960, progress=None, cancel=None,
+          log=None, init=None, settings=None, prior="smooth", recentre=RECENTRE, spread=None):
+    """Track a take with the particle filter, alone or as the coarse stage of the hybrid.
+
+    Parameters
+    ----------
+    plates : dict of str to Plate
+        One plate per view, in view order.
+    anchors : list of markers.Anchor
+    cameras : dict of str to PinholeCamera
+        One per view. Required: for uncalibrated plates use :func:`track.track`.
+    tracker : {"particle", "hybrid"}
+    particles : int
+        Particles of the filter.
+    seed : int
+        Seeds every random draw: the same inputs give the same track.
+    frames : range, optional
+        Take frames to track (default: all frames the plates share).
+    offsets : dict of str to int, optional
+        Per-view plate frame offset (take frame f is plate frame f + offset).
+    template : str
+        Body template of the initialization from the markers.
+    max_size : int
+        Longest side of the working images, pixels.
+    progress : callable(done, total), optional
+    cancel : callable() -> bool, optional
+        Polled once a frame; on cancel the frames already tracked are returned.
+    log : callable(str), optional
+    init : track.Initial, optional
+        Starting poses; by default fitted to the markers with :func:`initialize.initialize`.
+    settings : differential.Settings, optional
+        The refinement's settings (hybrid) and the image preparation's.
+    prior : {"smooth", "walk"}
+        The filter's temporal prior: smooth motion (§6.1, any motion) or the learned walking
+        cycle (§6.2).
+    recentre : float
+        Hybrid: share of the particles drawn again around each refined pose, 0 to 1.
+    spread : float, optional
+        Scale of the smooth-motion prior's position noise; default 1 for the filter alone,
+        :data:`SEARCH_SPREAD` for the hybrid.
+
+    Returns
+    -------
+    TrackResult
+        With ``spread``: the filter's posterior standard deviation per pose parameter and frame
+        (zero at the anchors' given poses); ``extra`` holds the filter's own per-frame status
+        and effective sample size.
+    """
+    from .plates import check_same_length
+
+    if tracker not in TRACKERS:
+        raise ZoopraxisError(f"unknown tracker '{tracker}' (expected one of "
+                             f"{', '.join(TRACKERS)})")
+    if prior not in PRIORS:
+        raise ZoopraxisError(f"unknown motion prior '{prior}' (expected one of "
+                             f"{', '.join(PRIORS)})")
+    if isinstance(particles, bool) or int(particles) != particles or particles < 1:
+        raise ZoopraxisError(f"the number of particles must be a positive whole number, "
+                             f"got {particles!r}")
+    if not 0 <= recentre <= 1:
+        raise ZoopraxisError(f"recentre must be a share between 0 and 1, got {recentre}")
+    spread = (SEARCH_SPREAD if tracker == "hybrid" else 1.0) if spread is None else spread
+    if not spread > 0:
+        raise ZoopraxisError(f"spread must be positive, got {spread}")
+    views = list(plates)
+    offsets = dict(offsets or {})
+    n_total = check_same_length(plates, offsets)
+    frames = range(0, n_total) if frames is None else frames
+    if len(frames) < 1:
+        raise ZoopraxisError("the frame range is empty")
+    if frames.start < 0 or frames.stop > n_total:
+        raise ZoopraxisError(f"frames {frames.start}:{frames.stop} are outside the take "
+                             f"(0:{n_total})")
+    if cameras is None:
+        raise ZoopraxisError(f"the {tracker} tracker needs a calibration (its likelihood "
+                             "projects through perspective cameras); for uncalibrated plates "
+                             "use --tracker differential")
+    missing = [v for v in views if v not in cameras]
+    if missing:
+        raise ZoopraxisError(f"the calibration has no camera for view '{missing[0]}'")
+    for v in views:
+        if tuple(cameras[v].image_size) != tuple(plates[v].image_size):
+            raise ZoopraxisError(
+                f"view '{v}': calibration image size {tuple(cameras[v].image_size)} differs "
+                f"from the plate's {tuple(plates[v].image_size)}")
+        if not hasattr(cameras[v], "K"):
+            raise ZoopraxisError(f"view '{v}': the {tracker} tracker needs a perspective "
+                                 "camera")
+    check_markers(anchors, views, n_total)
+    inside = [a for a in anchors if frames.start <= a.frame < frames.stop]
+    if not inside:
+        raise ZoopraxisError(f"no marker anchor inside frames {frames.start}:{frames.stop} "
+                             f"(anchors at {', '.join(str(a.frame) for a in anchors)})")
+    log = log or (lambda msg: None)
+    settings = settings or Settings()
+
+    if init is None:
+        from .initialize import initialize
+
+        res = initialize(inside, {v: cameras[v] for v in views}, template=template,
+                         calibrated=True, views=views)
+        init = Initial(res.body, res.poses, res.cameras, None, list(getattr(res, "warnings", [])))
+    for w in init.warnings:
+        log(f"warning: {w}")
+    body = init.body
+    fps = plates[views[0]].fps or 30.0
+
+    factors = {v: min(1.0, max_size / max(plates[v].image_size)) for v in views}
+    source = FrameSource(plates, views, offsets, factors)
+    work_cams = [cameras[v].scaled(factors[v], sampling="resize") if factors[v] != 1.0
+                 else cameras[v] for v in views]
+
+    def state_of(pose):
+        return State(np.stack([pose.root] * len(views)), pose.angles.copy(), list(work_cams))
+
+    def state_at(frame):
+        return state_of(init.poses[frame])
+
+    if tracker == "particle":
+        # No refinement: the images are prepared only to measure the residual, at one level.
+        settings = dataclasses.replace(settings, levels=1, iterations=settings.iterations[-1:])
+    diff = GuidedTracker(body, True, settings)
+    backgrounds, use_bg, ref_fit, ref_iou = _backgrounds(diff, source, views, frames, inside,
+                                                         state_at, log)
+
+    def images(colour):
+        return [prepare_images(to_gray_float(img), settings.levels, settings.smooth_sigma,
+                               backgrounds[c].foreground(img) if use_bg[c] else None)
+                for c, img in enumerate(colour)]
+
+    def make_prior():
+        if prior == "walk":
+            return WalkingPrior(body, fps=fps)
+        sigma_position, _ = smooth_sigmas(body, fps)
+        return SmoothMotionPrior(body, fps=fps, sigma_position=spread * sigma_position)
+
+    anchor_frames = [a.frame for a in inside]
+    passes = []
+    if anchor_frames[0] > frames.start:
+        passes.append((anchor_frames[0], frames.start, None))
+    for a, b in zip(anchor_frames[:-1], anchor_frames[1:]):
+        passes.append((a, b, "blend"))
+    if anchor_frames[-1] < frames.stop - 1:
+        passes.append((anchor_frames[-1], frames.stop - 1, None))
+    total = sum(abs(b - a) * (2 if kind == "blend" else 1) for a, b, kind in passes)
+    done = 0
+    seeds = iter(range(seed, seed + 7919 * (len(passes) * 2 + 1), 7919))
+
+    def run(start, stop):
+        """Track from anchor ``start`` to ``stop`` (inclusive), either direction.
+
+        Returns a dict frame -> (state, step report, spread, filter status, effective sample
+        size).
+        """
+        nonlocal done
+        step = 1 if stop > start else -1
+        st = state_at(start)
+        colour = source.colour(start)
+        ims = images(colour)
+        renders = diff.render_views(st)
+        diff.set_anchor(st, ims, renders)
+        prev = None
+        pf = ParticleFilter(body, work_cams, make_prior(), n_particles=particles,
+                            seed=next(seeds))
+        first = pf.start(colour, st.pose(0))
+        out = {start: (st, None, first.spread, "ok", first.ess)}
+        for f in range(start + step, stop + step, step):
+            if cancel is not None and cancel():
+                raise Cancelled(out)
+            colour = source.colour(f)
+            ims1 = images(colour)
+            fs = pf.step(colour)
+            if tracker == "particle":
+                new = state_of(fs.pose)
+                rep = _measure(diff, st, ims, ims1, new, renders)
+            else:
+                found = partitioned_search(pf, fs.pose, groups, search_n, search_rng)
+                # Start at what the search found; pull (weakly) towards the smooth prediction.
+                diff.centre = diff.predict(st, prev)
+                diff.proposal = state_of(found)
+                new, rep = diff.step(st, ims, ims1, None, renders)
+                diff.proposal = diff.centre = None
+                velocity = {"previous": st.pose(0)} if prior == "smooth" else {}
+                pf.recentre(new.pose(0), recentre, **velocity)
+            prev, st, ims, renders = st, new, ims1, rep.renders
+            rep.renders = None      # full-size images: keep them only for the next step
+            out[f] = (new, rep, fs.spread, fs.status, fs.ess)
+            done += 1
+            if progress is not None:
+                progress(done, total)
+        return out
+
+    def blended_fit(state, frame):
+        """Silhouette fit and overlap of a blended pose, measured anew."""
+        fit = np.full(len(views), np.nan)
+        iou = np.full(len(views), np.nan)
+        if not any(use_bg):
+            return fit, iou
+        renders = diff.render_views(state, want=())
+        for c, img in enumerate(source.colour(frame)):
+            if use_bg[c]:
+                fg = backgrounds[c].foreground(img)
+                fit[c] = model_coverage(renders[c].label >= 0, fg)
+                iou[c] = silhouette_iou(renders[c].label >= 0, fg)
+        return fit, iou
+
+    # The search draws as many poses as the filter has particles, shared among the groups.
+    groups = search_groups(body, fps)
+    search_n = max(2, particles // len(groups))
+    search_rng = np.random.default_rng(seed + 1)
+    tracked = {}
+    cancelled = False
+    try:
+        for a, b, kind in passes:
+            fwd = run(a, b)
+            if kind != "blend":
+                for f, item in fwd.items():
+                    tracked.setdefault(f, item)
+                continue
+            bwd = run(b, a)
+            tracked.setdefault(a, fwd[a])
+            tracked.setdefault(b, bwd[b])
+            for f in range(a + 1, b):
+                w = (f - a) / (b - a)
+                (sf, rf, pf_, tf, ef), (sb, rb, pb, tb, eb) = fwd[f], bwd[f]
+                state = _blend_states(sf, sb, w)
+                near = fwd[f] if w < 0.5 else bwd[f]
+                tracked[f] = (state, _blend_report(rf, rb, w, blended_fit(state, f)),
+                              (1 - w) * pf_ + w * pb, near[3], near[4])
+    except Cancelled as exc:
+        cancelled = True
+        for f, item in exc.args[0].items():
+            tracked.setdefault(f, item)
+        log("cancelled: keeping the frames tracked so far")
+    for a in anchor_frames:
+        tracked.setdefault(a, (state_at(a), None, None, "ok", float(particles)))
+
+    result = _make_result(body, views, plates, factors,
+                          {f: item[0] for f, item in tracked.items()},
+                          {f: item[1] for f, item in tracked.items()}, True, init,
+                          anchor_frames, frames, cancelled, ref_fit, ref_iou)
+    order = [int(f) for f in result.frames]
+    filter_status = [tracked[f][3] for f in order]
+    # At an anchor the pose is given: no spread (the filter's initial cloud is its own choice).
+    P = 6 + body.n_dofs
+    result.spread = np.array([np.zeros(P) if f in anchor_frames or tracked[f][2] is None
+                              else tracked[f][2] for f in order])
+    for i, f in enumerate(order):
+        if f in anchor_frames:
+            continue
+        if tracker == "particle":
+            result.status[i] = _worse(result.status[i], filter_status[i])
+        elif filter_status[i] == "lost":
+            # The refinement fits the images, but the search behind it did not find the body.
+            result.status[i] = _worse(result.status[i], "uncertain")
+    result.extra.update({"tracker": tracker, "particles": int(particles), "seed": int(seed),
+                         "motion_prior": prior, "filter_status": filter_status,
+                         "effective_sample_size": [round(float(tracked[f][4]), 1)
+                                                   for f in order]})
+    if tracker == "hybrid":
+        result.extra.update({"recentre": float(recentre), "search_spread": float(spread)})
+    return result
+
+
+def _backgrounds(diff, source, views, frames, inside, state_at, log):
+    """Background model per view, whether to use it, and the first anchor's silhouette fit
+    and overlap: the procedure of :func:`track.track`.
+
+    Frames spread over the take give each view's background; the model's dilated silhouette at
+    the anchors keeps the person out of it; a view whose foreground does not cover the model at
+    the first anchor goes without silhouettes.
+    """
+    sample_frames = np.unique(np.linspace(frames.start, frames.stop - 1,
+                                          min(25, len(frames))).astype(int))
+    log(f"background: {len(sample_frames)} frames per view")
+    per_view = [[] for _ in views]
+    for f in sample_frames:
+        for c, img in enumerate(source.colour(int(f))):
+            per_view[c].append(img)
+    exclude = [[] for _ in views]
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (9, 9))
+    for a in inside:
+        renders_a = diff.render_views(state_at(a.frame), want=())
+        for c, img in enumerate(source.colour(a.frame)):
+            mask = cv2.dilate((renders_a[c].label >= 0).astype(np.uint8), kernel) > 0
+            exclude[c].append((img, mask))
+    backgrounds = [estimate_background(imgs, exclude=exclude[c]) if len(imgs) >= 5 else None
+                   for c, imgs in enumerate(per_view)]
+    use_bg = [bg is not None for bg in backgrounds]
+    a0 = inside[0].frame
+    r0 = diff.render_views(state_at(a0), want=())
+    colour0 = source.colour(a0)
+    ref_fit = np.full(len(views), np.nan)
+    ref_iou = np.full(len(views), np.nan)
+    for c in range(len(views)):
+        if not use_bg[c]:
+            continue
+        bg = backgrounds[c]
+        cov = model_coverage(r0[c].label >= 0, bg.foreground(colour0[c]) & bg.known, bg.known)
+        if cov < 0.5:
+            use_bg[c] = False
+            log(f"view '{views[c]}': background model unreliable here "
+                f"(covers {cov:.0%} of the body); silhouettes off")
+            continue
+        fg = bg.foreground(colour0[c])
+        ref_fit[c] = model_coverage(r0[c].label >= 0, fg)
+        ref_iou[c] = max(silhouette_iou(r0[c].label >= 0, fg), 0.05)
+        if ref_fit[c] < MIN_ANCHOR_FIT:
+            use_bg[c] = False
+            log(f"view '{views[c]}': only {ref_fit[c]:.0%} of the model lies in the "
+                "foreground at the anchor; silhouettes off")
+            ref_fit[c] = ref_iou[c] = np.nan
+    return backgrounds, use_bg, ref_fit, ref_iou
+
+
+def _measure(diff, state_t, images_t, images_t1, state_t1, renders_t):
+    """Image evidence of a pose the differential tracker did not find.
+
+    The residual is the differential tracker's own: the mean absolute grey difference (0-255)
+    between frame t's model pixels and where the pose at t+1 moves them in frame t+1
+    (brightness constancy, Bregler & Malik eq. 3), so that both trackers report in one unit;
+    the silhouette fit and overlap are taken against the foreground mask.
+    """
+    V = len(state_t.cameras)
+    flow = diff.template_terms(state_t, images_t, renders_t)[0]
+    renders = diff.render_views(state_t1)
+    residual = np.zeros(V)
+    iou = np.full(V, np.nan)
+    coverage = np.full(V, np.nan)
+    for c in range(V):
+        acc = accumulate(flow[c], images_t1[c].stacks[0], state_t1.cameras[c],
+                         diff.body.seg2world(state_t1.pose(c)), diff.body.n_segments,
+                         robust=False)
+        if acc.inside.any():
+            residual[c] = 255.0 * np.mean(np.abs(acc.residual[acc.inside]))
+        if images_t1[c].foreground is not None:
+            model = renders[c].label >= 0
+            iou[c] = silhouette_iou(model, images_t1[c].foreground)
+            coverage[c] = model_coverage(model, images_t1[c].foreground)
+    return StepReport(residual, iou, 0.0, 0, renders, coverage)
+
+
+__all__ = ["track", "GuidedTracker", "partitioned_search", "search_groups", "TRACKERS", "PRIORS",
+           "RECENTRE", "SEARCH_SPREAD", "SEARCH_WIDTHS"]
