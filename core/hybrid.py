@@ -12,8 +12,8 @@ land centimetres from the likelihood's peak, and its expected pose drifts. The t
   posterior's spread its uncertainty.
 - ``hybrid``: the coarse search, then the refinement, every frame:
 
-  1. the filter steps, its prior drawn ``spread`` times wider than alone (precision is the
-     refinement's job), and proposes its expected pose;
+  1. the filter steps, its prior drawn :data:`SEARCH_SPREAD` times wider than alone
+     (precision is the refinement's job), and proposes its expected pose;
   2. a partitioned search (:func:`partitioned_search`) moves the proposal one limb at a time to
      the best of a few hundred draws under the filter's likelihood: the likelihood is a product
      over limbs (eq. 12), so each limb is found in its own few dimensions, where the filter's
@@ -172,7 +172,8 @@ def _worse(a, b):
 
 def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, seed=2345,
           frames=None, offsets=None, template="full", max_size=960, progress=None, cancel=None,
-          log=None, init=None, settings=None, prior="smooth", recentre=RECENTRE, spread=None):
+          log=None, init=None, settings=None, prior="smooth", recentre=RECENTRE,
+          prior_scale=None):
     """Track a take with the particle filter, alone or as the coarse stage of the hybrid.
 
     Parameters
@@ -208,9 +209,9 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
         cycle (§6.2).
     recentre : float
         Hybrid: share of the particles drawn again around each refined pose, 0 to 1.
-    spread : float, optional
+    prior_scale : float, optional
         Scale of the smooth-motion prior's position noise; default 1 for the filter alone,
-        :data:`SEARCH_SPREAD` for the hybrid.
+        :data:`SEARCH_SPREAD` for the hybrid (the walking prior keeps its own).
 
     Returns
     -------
@@ -232,9 +233,10 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
                              f"got {particles!r}")
     if not 0 <= recentre <= 1:
         raise ZoopraxisError(f"recentre must be a share between 0 and 1, got {recentre}")
-    spread = (SEARCH_SPREAD if tracker == "hybrid" else 1.0) if spread is None else spread
-    if not spread > 0:
-        raise ZoopraxisError(f"spread must be positive, got {spread}")
+    if prior_scale is None:
+        prior_scale = SEARCH_SPREAD if tracker == "hybrid" else 1.0
+    if not prior_scale > 0:
+        raise ZoopraxisError(f"prior_scale must be positive, got {prior_scale}")
     views = list(plates)
     offsets = dict(offsets or {})
     n_total = check_same_length(plates, offsets)
@@ -305,7 +307,7 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
         if prior == "walk":
             return WalkingPrior(body, fps=fps)
         sigma_position, _ = smooth_sigmas(body, fps)
-        return SmoothMotionPrior(body, fps=fps, sigma_position=spread * sigma_position)
+        return SmoothMotionPrior(body, fps=fps, sigma_position=prior_scale * sigma_position)
 
     anchor_frames = [a.frame for a in inside]
     passes = []
@@ -318,6 +320,10 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
     total = sum(abs(b - a) * (2 if kind == "blend" else 1) for a, b, kind in passes)
     done = 0
     seeds = iter(range(seed, seed + 7919 * (len(passes) * 2 + 1), 7919))
+    # The search draws as many poses as the filter has particles, shared among the groups.
+    groups = search_groups(body, fps)
+    search_n = max(2, particles // len(groups))
+    search_rng = np.random.default_rng(seed + 1)
 
     def run(start, stop):
         """Track from anchor ``start`` to ``stop`` (inclusive), either direction.
@@ -377,10 +383,6 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
                 iou[c] = silhouette_iou(renders[c].label >= 0, fg)
         return fit, iou
 
-    # The search draws as many poses as the filter has particles, shared among the groups.
-    groups = search_groups(body, fps)
-    search_n = max(2, particles // len(groups))
-    search_rng = np.random.default_rng(seed + 1)
     tracked = {}
     cancelled = False
     try:
@@ -431,7 +433,7 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
                          "effective_sample_size": [round(float(tracked[f][4]), 1)
                                                    for f in order]})
     if tracker == "hybrid":
-        result.extra.update({"recentre": float(recentre), "search_spread": float(spread)})
+        result.extra.update({"recentre": float(recentre), "prior_scale": float(prior_scale)})
     return result
 
 
