@@ -34,11 +34,10 @@ need calibrated cameras: the filter's likelihood projects through perspective ca
 
 import dataclasses
 
-import cv2
 import numpy as np
 
 from . import se3
-from .background import estimate_background, model_coverage, silhouette_iou
+from .background import model_coverage, silhouette_iou
 from .body import Pose
 from .differential import DifferentialTracker, Settings, State, StepReport, prepare_images
 from .errors import ZoopraxisError
@@ -47,8 +46,8 @@ from .markers import check_markers
 from .motion_prior import SmoothMotionPrior, WalkingPrior, smooth_sigmas
 from .particle import ParticleFilter
 from .plates import to_gray_float
-from .track import (MIN_ANCHOR_FIT, Cancelled, FrameSource, Initial, _blend_report,
-                    _blend_states, _make_result)
+from .track import (Cancelled, FrameSource, Initial, _blend_report, _blend_states,
+                    _make_result, silhouette_measures, take_backgrounds)
 
 TRACKERS = ("particle", "hybrid")
 PRIORS = ("smooth", "walk")
@@ -295,8 +294,8 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
         # No refinement: the images are prepared only to measure the residual, at one level.
         settings = dataclasses.replace(settings, levels=1, iterations=settings.iterations[-1:])
     diff = GuidedTracker(body, True, settings)
-    backgrounds, use_bg, ref_fit, ref_iou = _backgrounds(diff, source, views, frames, inside,
-                                                         state_at, log)
+    backgrounds, use_bg, ref_fit, ref_iou = take_backgrounds(diff, source, views, frames,
+                                                             inside, state_at, log)
 
     def images(colour):
         return [prepare_images(to_gray_float(img), settings.levels, settings.smooth_sigma,
@@ -371,17 +370,7 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
 
     def blended_fit(state, frame):
         """Silhouette fit and overlap of a blended pose, measured anew."""
-        fit = np.full(len(views), np.nan)
-        iou = np.full(len(views), np.nan)
-        if not any(use_bg):
-            return fit, iou
-        renders = diff.render_views(state, want=())
-        for c, img in enumerate(source.colour(frame)):
-            if use_bg[c]:
-                fg = backgrounds[c].foreground(img)
-                fit[c] = model_coverage(renders[c].label >= 0, fg)
-                iou[c] = silhouette_iou(renders[c].label >= 0, fg)
-        return fit, iou
+        return silhouette_measures(diff, state, source.colour(frame), backgrounds, use_bg)
 
     tracked = {}
     cancelled = False
@@ -435,57 +424,6 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
     if tracker == "hybrid":
         result.extra.update({"recentre": float(recentre), "prior_scale": float(prior_scale)})
     return result
-
-
-def _backgrounds(diff, source, views, frames, inside, state_at, log):
-    """Background model per view, whether to use it, and the first anchor's silhouette fit
-    and overlap: the procedure of :func:`track.track`.
-
-    Frames spread over the take give each view's background; the model's dilated silhouette at
-    the anchors keeps the person out of it; a view whose foreground does not cover the model at
-    the first anchor goes without silhouettes.
-    """
-    sample_frames = np.unique(np.linspace(frames.start, frames.stop - 1,
-                                          min(25, len(frames))).astype(int))
-    log(f"background: {len(sample_frames)} frames per view")
-    per_view = [[] for _ in views]
-    for f in sample_frames:
-        for c, img in enumerate(source.colour(int(f))):
-            per_view[c].append(img)
-    exclude = [[] for _ in views]
-    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (9, 9))
-    for a in inside:
-        renders_a = diff.render_views(state_at(a.frame), want=())
-        for c, img in enumerate(source.colour(a.frame)):
-            mask = cv2.dilate((renders_a[c].label >= 0).astype(np.uint8), kernel) > 0
-            exclude[c].append((img, mask))
-    backgrounds = [estimate_background(imgs, exclude=exclude[c]) if len(imgs) >= 5 else None
-                   for c, imgs in enumerate(per_view)]
-    use_bg = [bg is not None for bg in backgrounds]
-    a0 = inside[0].frame
-    r0 = diff.render_views(state_at(a0), want=())
-    colour0 = source.colour(a0)
-    ref_fit = np.full(len(views), np.nan)
-    ref_iou = np.full(len(views), np.nan)
-    for c in range(len(views)):
-        if not use_bg[c]:
-            continue
-        bg = backgrounds[c]
-        cov = model_coverage(r0[c].label >= 0, bg.foreground(colour0[c]) & bg.known, bg.known)
-        if cov < 0.5:
-            use_bg[c] = False
-            log(f"view '{views[c]}': background model unreliable here "
-                f"(covers {cov:.0%} of the body); silhouettes off")
-            continue
-        fg = bg.foreground(colour0[c])
-        ref_fit[c] = model_coverage(r0[c].label >= 0, fg)
-        ref_iou[c] = max(silhouette_iou(r0[c].label >= 0, fg), 0.05)
-        if ref_fit[c] < MIN_ANCHOR_FIT:
-            use_bg[c] = False
-            log(f"view '{views[c]}': only {ref_fit[c]:.0%} of the model lies in the "
-                "foreground at the anchor; silhouettes off")
-            ref_fit[c] = ref_iou[c] = np.nan
-    return backgrounds, use_bg, ref_fit, ref_iou
 
 
 def _measure(diff, state_t, images_t, images_t1, state_t1, renders_t):

@@ -108,6 +108,79 @@ def _blend_states(a, b, w):
     return out
 
 
+def take_backgrounds(tracker, source, views, frames, inside, state_at, log):
+    """Background model per view, whether to use it, and the first anchor's silhouette fit
+    and overlap (the references for the frames' status).
+
+    Frames spread over the take give each view's background; the model's dilated silhouette at
+    the anchors keeps the person out of it; a view whose foreground does not cover the model at
+    the first anchor goes without silhouettes.
+    """
+    sample_frames = np.unique(np.linspace(frames.start, frames.stop - 1,
+                                          min(25, len(frames))).astype(int))
+    log(f"background: {len(sample_frames)} frames per view")
+    per_view = [[] for _ in views]
+    for f in sample_frames:
+        for c, img in enumerate(source.colour(int(f))):
+            per_view[c].append(img)
+    exclude = [[] for _ in views]
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (9, 9))
+    for a in inside:
+        renders_a = tracker.render_views(state_at(a.frame), want=())
+        for c, img in enumerate(source.colour(a.frame)):
+            mask = cv2.dilate((renders_a[c].label >= 0).astype(np.uint8), kernel) > 0
+            exclude[c].append((img, mask))
+    backgrounds = [estimate_background(imgs, exclude=exclude[c]) if len(imgs) >= 5 else None
+                   for c, imgs in enumerate(per_view)]
+    use_bg = [bg is not None for bg in backgrounds]
+    a0 = inside[0].frame
+    r0 = tracker.render_views(state_at(a0), want=())
+    colour0 = source.colour(a0)
+    ref_fit = np.full(len(views), np.nan)
+    ref_iou = np.full(len(views), np.nan)
+    for c in range(len(views)):
+        if not use_bg[c]:
+            continue
+        bg = backgrounds[c]
+        cov = model_coverage(r0[c].label >= 0, bg.foreground(colour0[c]) & bg.known, bg.known)
+        if cov < 0.5:
+            use_bg[c] = False
+            log(f"view '{views[c]}': background model unreliable here "
+                f"(covers {cov:.0%} of the body); silhouettes off")
+            continue
+        fg = bg.foreground(colour0[c])
+        ref_fit[c] = model_coverage(r0[c].label >= 0, fg)
+        ref_iou[c] = max(silhouette_iou(r0[c].label >= 0, fg), 0.05)
+        if ref_fit[c] < MIN_ANCHOR_FIT:
+            use_bg[c] = False
+            log(f"view '{views[c]}': only {ref_fit[c]:.0%} of the model lies in the "
+                "foreground at the anchor; silhouettes off")
+            ref_fit[c] = ref_iou[c] = np.nan
+    return backgrounds, use_bg, ref_fit, ref_iou
+
+
+def silhouette_measures(tracker, state, colours, backgrounds, use_bg):
+    """Silhouette fit and overlap of a pose in every view whose background is used.
+
+    Returns
+    -------
+    fit, iou : array, shape (V,)
+        NaN where a view has no usable background.
+    """
+    V = len(colours)
+    fit = np.full(V, np.nan)
+    iou = np.full(V, np.nan)
+    if not any(use_bg):
+        return fit, iou
+    renders = tracker.render_views(state, want=())
+    for c, img in enumerate(colours):
+        if use_bg[c]:
+            fg = backgrounds[c].foreground(img)
+            fit[c] = model_coverage(renders[c].label >= 0, fg)
+            iou[c] = silhouette_iou(renders[c].label >= 0, fg)
+    return fit, iou
+
+
 def frame_status(rel_fit, rel_iou, residual_ratio):
     """ok, uncertain or lost, from one frame's diagnostics.
 
@@ -244,49 +317,8 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
 
     # Background models from frames spread over the take; at the anchor frames the model's
     # (dilated) silhouette says where the person is, which keeps a slow mover out of it.
-    sample_frames = np.unique(np.linspace(frames.start, frames.stop - 1,
-                                          min(25, len(frames))).astype(int))
-    log(f"background: {len(sample_frames)} frames per view")
-    per_view = [[] for _ in views]
-    for f in sample_frames:
-        for c, img in enumerate(source.colour(int(f))):
-            per_view[c].append(img)
-    exclude = [[] for _ in views]
-    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (9, 9))
-    for a in anchor_frames_all(inside):
-        renders_a = tracker.render_views(state_at(a), want=())
-        for c, img in enumerate(source.colour(a)):
-            mask = cv2.dilate((renders_a[c].label >= 0).astype(np.uint8), kernel) > 0
-            exclude[c].append((img, mask))
-    backgrounds = [estimate_background(imgs, exclude=exclude[c]) if len(imgs) >= 5 else None
-                   for c, imgs in enumerate(per_view)]
-    use_bg = [bg is not None for bg in backgrounds]
-    # A view whose background swallowed the person (who stood still) gives no silhouette.
-    a0 = inside[0].frame
-    r0 = tracker.render_views(state_at(a0), want=())
-    colour0 = source.colour(a0)
-    for c in range(len(views)):
-        if use_bg[c]:
-            bg = backgrounds[c]
-            cov = model_coverage(r0[c].label >= 0, bg.foreground(colour0[c]) & bg.known,
-                                 bg.known)
-            if cov < 0.5:
-                use_bg[c] = False
-                log(f"view '{views[c]}': background model unreliable here "
-                    f"(covers {cov:.0%} of the body); silhouettes off")
-    # Overlap of model and foreground at the anchors: the reference for the status.
-    ref_fit = np.full(len(views), np.nan)
-    ref_iou = np.full(len(views), np.nan)
-    for c in range(len(views)):
-        if use_bg[c]:
-            fg = backgrounds[c].foreground(colour0[c])
-            ref_fit[c] = model_coverage(r0[c].label >= 0, fg)
-            ref_iou[c] = max(silhouette_iou(r0[c].label >= 0, fg), 0.05)
-            if ref_fit[c] < MIN_ANCHOR_FIT:
-                use_bg[c] = False
-                log(f"view '{views[c]}': only {ref_fit[c]:.0%} of the model lies in the "
-                    "foreground at the anchor; silhouettes off")
-                ref_fit[c] = ref_iou[c] = np.nan
+    backgrounds, use_bg, ref_fit, ref_iou = take_backgrounds(tracker, source, views, frames,
+                                                             inside, state_at, log)
 
     def images(frame):
         out = []
@@ -339,17 +371,7 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
     def blended_fit(state, frame):
         """Silhouette fit and overlap of a blended pose, measured anew: they are not either
         pass's."""
-        fit = np.full(len(views), np.nan)
-        iou = np.full(len(views), np.nan)
-        if not any(use_bg):
-            return fit, iou
-        renders = tracker.render_views(state, want=())
-        for c, img in enumerate(source.colour(frame)):
-            if use_bg[c]:
-                fg = backgrounds[c].foreground(img)
-                fit[c] = model_coverage(renders[c].label >= 0, fg)
-                iou[c] = silhouette_iou(renders[c].label >= 0, fg)
-        return fit, iou
+        return silhouette_measures(tracker, state, source.colour(frame), backgrounds, use_bg)
 
     cancelled = False
     try:
