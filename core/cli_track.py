@@ -32,6 +32,10 @@ def build_parser():
     p.add_argument("--particles", type=int, default=2000,
                    help="particles of the particle and hybrid trackers (default 2000)")
     p.add_argument("--seed", type=int, default=2345)
+    p.add_argument("--refine-body", action="store_true",
+                   help="after tracking, refine the limb lengths on the silhouettes and clicks "
+                        "of the whole take and track again, keeping the better track "
+                        "(differential tracker, calibrated views)")
     p.add_argument("--out", required=True, help="result.json to write")
     p.add_argument("--force", action="store_true", help="replace an existing result file")
     return p
@@ -59,13 +63,21 @@ def main(argv):
     if args.calibration:
         cameras = calibfile.check_views(calibfile.read_calibration(args.calibration),
                                         list(opened), args.calibration)
+    if args.refine_body and args.tracker != "differential":
+        raise ZoopraxisError("--refine-body works with --tracker differential only")
+    if args.refine_body and cameras is None:
+        raise ZoopraxisError("--refine-body needs --calibration (calibrated views)")
     stop = _StopOnInterrupt()
     kwargs = dict(frames=frames, offsets=offsets, template=args.template,
                   max_size=args.max_size, progress=ConsoleProgress("track"), cancel=stop,
                   log=lambda msg: print(f"track: {msg}", flush=True))
     t0 = time.perf_counter()
     with stop:
-        if args.tracker == "differential":
+        if args.tracker == "differential" and args.refine_body:
+            from .finetune import finetune
+
+            result = finetune(opened, anchors, cameras, **kwargs).result
+        elif args.tracker == "differential":
             from .track import track
 
             result = track(opened, anchors, cameras, **kwargs)

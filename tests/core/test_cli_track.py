@@ -85,3 +85,31 @@ def test_joint_marked_in_no_view(take, tmp_path):
     args[args.index("--markers") + 1] = path
     run = zoopraxis(*args)
     assert run.returncode == 2 and "r_elbow" in run.stderr and "no view" in run.stderr
+
+
+def test_refine_body_tracks_again_and_says_what_changed(take, tmp_path):
+    out = tmp_path / "refined.json"
+    run = zoopraxis(*track_args(take, out, "--refine-body"))
+    assert run.returncode == 0, run.stderr
+    assert "fine-tune: lengths" in run.stdout and "thigh" in run.stdout
+    assert "keeping the re-track" in run.stdout or "keeping the first track" in run.stdout
+    res = result_io.read_result(out)
+    truth = synth.read_truth(take / "truth.json")
+    assert list(res.frames) == list(range(6))
+    assert np.linalg.norm(res.joints3d - truth["joints3d"], axis=2).mean() < 0.05
+
+
+@pytest.mark.parametrize("change, message", [
+    (["--tracker", "particle"], "--tracker differential"),
+    (["--calibration", None], "needs --calibration"),
+])
+def test_refine_body_bad_options_are_one_line(take, tmp_path, change, message):
+    args = track_args(take, tmp_path / "r.json", "--refine-body")
+    if change[1] is None:
+        i = args.index(change[0])
+        del args[i:i + 2]
+    else:
+        args += change
+    run = zoopraxis(*args)
+    assert run.returncode == 2
+    assert message in run.stderr and len(run.stderr.strip().splitlines()) == 1

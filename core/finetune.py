@@ -1,0 +1,595 @@
+"""Model fine-tuning over a tracked sequence (Bregler & Malik §2.7).
+
+"After tracking, refine the body dimensions over the whole sequence, and re-track if that
+helps." The first track's poses are good enough to say where every segment is in every frame;
+the images then say how long the segments are: the model's occluding contour should lie on the
+person's silhouette against the background, in every sampled frame and view, and the model's
+joints on the animator's clicks at the anchor frames. Both are image evidence; the tracker's
+own projected joints are not used (they would only confirm the body they came from).
+
+One joint problem over the sampled frames: the lengths (``body.LENGTH_DIMS``) are shared, each
+frame has its own pose (root twist and angles). Residuals:
+
+- silhouette: the observed signed distance (``background.signed_distance``, positive outside)
+  at every contour pixel of the rendered model, robust, each frame and view weighted alike;
+- clicks: model joints minus clicked joints at the anchor frames, robust;
+- a weak prior holding each length near its start (what the images cannot see stays put).
+
+A contour point on a segment moves with the segment's two end joints: at fixed angles the
+joints are linear in the lengths (``BodyModel.joints_dims_jacobian``), and a point a fraction
+``a`` of the way from the near to the far joint moves by ``(1 - a) dP + a dQ``; with the pose
+it moves with its segment's spatial velocity (eq. 23). Levenberg-Marquardt with the frames
+eliminated by the Schur complement (like ``initialize.refine_dims``); the contour is rendered
+anew at every step.
+
+Then the take is tracked again from the refined body, and the new track is kept only if the
+tracker's own measures say it is better (silhouette overlap, frames lost).
+
+Convention: world Z up, metres; OpenCV cameras and pixels; calibrated views only (scaled
+orthographic views cannot see a body's size, and their per-view roots are not in a result).
+"""
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from . import se3
+from .background import BackgroundModel, estimate_background, signed_distance
+from .body import LENGTH_DIMS, Pose
+from .errors import ZoopraxisError
+from .image_motion import image_with_gradients, sample
+from .joints import JOINT_INDEX, STANDARD_JOINTS
+from .render import render
+
+# Robust scales (working pixels) and weights. Each sampled frame and view counts as this many
+# contour points, whatever its resolution and the person's size in it.
+CONTOUR_SCALE_PX = 2.0
+CLICK_SCALE_PX = 3.0
+POINTS_PER_VIEW = 100.0
+MAX_CONTOUR_POINTS = 800
+# A length one prior spread (relative) from its start costs one squared pixel.
+DIMS_PRIOR_SIGMA = 0.10
+# Clicks count like this many contour points each (they say where the joint centres are).
+CLICK_WEIGHT = 10.0
+# The lengths refined: the limbs'. The trunk's and the head's outlines are their radii more
+# than their lengths (and clothes, hair), and its lengths and widths are what the anchors'
+# clicks see best; the limbs are what one anchor sees foreshortened.
+REFINED_DIMS = ("thigh", "shank", "foot_length", "upper_arm", "forearm")
+# Lengths stay within these multiples of their start.
+DIMS_STEP_RANGE = (0.7, 1.4)
+
+# The two joints a segment's points move with: a contour point of the segment is placed a
+# fraction of the way between them.
+_SEGMENT_ENDS = {"pelvis": ("l_hip", "r_hip"), "abdomen": ("pelvis", "neck"),
+                 "chest": ("pelvis", "neck"), "head": ("neck", "head")}
+for _s in ("l", "r"):
+    _SEGMENT_ENDS.update({f"{_s}_upper_arm": (f"{_s}_shoulder", f"{_s}_elbow"),
+                          f"{_s}_forearm": (f"{_s}_elbow", f"{_s}_wrist"),
+                          f"{_s}_thigh": (f"{_s}_hip", f"{_s}_knee"),
+                          f"{_s}_shank": (f"{_s}_knee", f"{_s}_ankle"),
+                          f"{_s}_foot": (f"{_s}_ankle", f"{_s}_toe")})
+
+
+@dataclass
+class BodyFit:
+    """What :func:`fit_body_to_images` found.
+
+    Attributes
+    ----------
+    body : BodyModel
+        With the refined limb lengths (``REFINED_DIMS``); the rest as it was.
+    poses : list of Pose
+        Refined pose of every sampled frame.
+    cost_before, cost_after : float
+        Objective at the start and at the end (contour and click terms, robust).
+    contour_rms : tuple of float
+        Root-mean-square contour distance to the silhouette (working pixels), before and after.
+    iterations : int
+    cancelled : bool
+    """
+
+    body: object
+    poses: list
+    cost_before: float
+    cost_after: float
+    contour_rms: tuple
+    iterations: int
+    cancelled: bool = False
+
+
+def _segment_ends(body):
+    ends = []
+    for name in body.segment_names:
+        if name not in _SEGMENT_ENDS:
+            raise ZoopraxisError(f"body fine-tuning: template '{body.template}' has a segment "
+                                 f"'{name}' it does not know")
+        p, q = _SEGMENT_ENDS[name]
+        ends.append((JOINT_INDEX[p], JOINT_INDEX[q]))
+    return np.array(ends)
+
+
+def _robust(r, scale):
+    """Soft-L1 cost ``2 c^2 (sqrt(1 + r^2/c^2) - 1)`` and its IRLS weight."""
+    q = np.sqrt(1.0 + (r / scale) ** 2)
+    return 2.0 * scale ** 2 * (q - 1.0), 1.0 / q
+
+
+class _Problem:
+    """The contour and click residuals of a body over the sampled frames."""
+
+    def __init__(self, body, cameras, sdf, clicks, dims0):
+        self.template_body = body
+        self.cameras = cameras          # V working cameras
+        self.sdf = sdf                  # K lists of V stacks (H, W, 3) or None
+        self.clicks = clicks            # K arrays (V, 17, 2), NaN where not clicked
+        self.dims0 = dims0
+        self.ends = _segment_ends(body)
+        self.names = list(REFINED_DIMS)
+
+    def body_with(self, dims):
+        body = self.template_body
+        return body.with_dims(dict(zip(self.names, dims)))
+
+    def linearize(self, dims, poses, jacobians=True):
+        """Cost and, with ``jacobians``, the normal equations' blocks.
+
+        Returns
+        -------
+        cost : float
+        rms : float
+            Contour distance RMS, pixels.
+        blocks : tuple or None
+            ``(H_ff (K, P, P), H_fd (K, P, D), g_f (K, P), H_dd (D, D), g_d (D,))`` of the
+            robust (reweighted) Gauss-Newton system, without the prior.
+        """
+        body = self.body_with(dims)
+        prims = body.primitives()
+        K, D = len(poses), len(dims)
+        P = 6 + body.n_dofs
+        H_ff = np.zeros((K, P, P))
+        H_fd = np.zeros((K, P, D))
+        g_f = np.zeros((K, P))
+        H_dd = np.zeros((D, D))
+        g_d = np.zeros(D)
+        cost, sq, count = 0.0, 0.0, 0
+        for k, pose in enumerate(poses):
+            T, seg_J = body.kinematics(pose)
+            Xj, Jj = body.joints_jacobian(pose)                          # (17, 3), (17, 3, P)
+            Jd = body.joints_dims_jacobian(pose, self.names)              # (17, 3, D)
+            rows = []                                                      # (r, w, dr/dpose, dr/ddims)
+            for c, cam in enumerate(self.cameras):
+                if self.sdf[k][c] is None:
+                    continue
+                rr = render(cam, T, prims, want=("point",))
+                fgm = rr.label >= 0
+                inner = cv2.erode(fgm.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+                vv, uu = np.nonzero(fgm & ~inner)
+                if len(vv) == 0:
+                    continue
+                if len(vv) > MAX_CONTOUR_POINTS:
+                    keep = np.linspace(0, len(vv) - 1, MAX_CONTOUR_POINTS).astype(int)
+                    vv, uu = vv[keep], uu[keep]
+                seg = rr.label[vv, uu].astype(np.int64)
+                X = rr.point[vv, uu].astype(np.float64)
+                uv, A = cam.project_jacobian(X)
+                vals, inside = sample(self.sdf[k][c], uv)
+                if not inside.any():
+                    continue
+                seg, X, A, vals = seg[inside], X[inside], A[inside], vals[inside].astype(float)
+                r = vals[:, 0]
+                rho, w = _robust(r, CONTOUR_SCALE_PX)
+                weight = POINTS_PER_VIEW / len(r)
+                cost += weight * rho.sum()
+                sq += float(np.sum(r ** 2))
+                count += len(r)
+                if not jacobians:
+                    continue
+                dr_dX = np.einsum("ni,nij->nj", vals[:, 1:3], A)              # (N, 3)
+                J_pose = np.einsum("nj,njk->nk", dr_dX, se3.point_velocity_matrix(X)
+                                   @ seg_J[seg])
+                p, q = self.ends[seg].T
+                axis = Xj[q] - Xj[p]
+                a = np.einsum("ni,ni->n", X - Xj[p], axis) / np.maximum(
+                    np.einsum("ni,ni->n", axis, axis), 1e-9)
+                J_pt = (1.0 - a)[:, None, None] * Jd[p] + a[:, None, None] * Jd[q]
+                J_dims = np.einsum("nj,njd->nd", dr_dX, J_pt)
+                rows.append((r, weight * w, J_pose, J_dims))
+            clicked = np.isfinite(self.clicks[k]).all(axis=-1)              # (V, 17)
+            for c in np.flatnonzero(clicked.any(axis=1)):
+                j = np.flatnonzero(clicked[c])
+                uv, A = self.cameras[c].project_jacobian(Xj[j])
+                r = (uv - self.clicks[k][c, j]).ravel()
+                rho, w = _robust(r, CLICK_SCALE_PX)
+                cost += CLICK_WEIGHT * rho.sum()
+                if not jacobians:
+                    continue
+                J_pose = (A @ Jj[j]).reshape(-1, P)
+                J_dims = (A @ Jd[j]).reshape(-1, D)
+                rows.append((r, CLICK_WEIGHT * w, J_pose, J_dims))
+            for r, w, J_pose, J_dims in rows:
+                Jw = J_pose * w[:, None]
+                H_ff[k] += Jw.T @ J_pose
+                H_fd[k] += Jw.T @ J_dims
+                g_f[k] -= Jw.T @ r
+                Dw = J_dims * w[:, None]
+                H_dd += Dw.T @ J_dims
+                g_d -= Dw.T @ r
+        rms = float(np.sqrt(sq / count)) if count else float("nan")
+        blocks = (H_ff, H_fd, g_f, H_dd, g_d) if jacobians else None
+        return cost, rms, blocks
+
+    def prior(self, dims):
+        """Prior cost, gradient and Hessian of the lengths (relative to their start)."""
+        w = 1.0 / (DIMS_PRIOR_SIGMA * self.dims0) ** 2
+        e = dims - self.dims0
+        return float(np.sum(w * e ** 2)), -2.0 * w * e, 2.0 * np.diag(w)
+
+
+def fit_body_to_images(body, poses, cameras, masks, clicks=None, *, iterations=10, cancel=None,
+                       log=None):
+    """Refine a body's lengths and the poses of some frames on silhouettes and clicks (§2.7).
+
+    Parameters
+    ----------
+    body : BodyModel
+        The body the frames were tracked with; its lengths are the start.
+    poses : list of Pose
+        World pose of each frame (calibrated cameras).
+    cameras : list of PinholeCamera
+        One per view, at the resolution of the masks.
+    masks : list of list of array of bool, shape (H, W), or None
+        Foreground mask per frame and view (None: the view gives no silhouette there).
+    clicks : list of array, shape (V, 17, 2), optional
+        Clicked joints per frame in the cameras' pixels, NaN where not clicked.
+    iterations : int
+        Levenberg-Marquardt steps at most.
+    cancel : callable() -> bool, optional
+        Polled before each step; on cancel the best body so far is returned.
+    log : callable(str), optional
+
+    Returns
+    -------
+    fit : BodyFit
+    """
+    log = log or (lambda msg: None)
+    K, V = len(poses), len(cameras)
+    if len(masks) != K or any(len(m) != V for m in masks):
+        raise ZoopraxisError(f"body fine-tuning: need {K} frames x {V} views of masks")
+    if clicks is None:
+        clicks = [np.full((V, 17, 2), np.nan) for _ in range(K)]
+    sdf = [[None if m is None else image_with_gradients(signed_distance(np.asarray(m, bool)))
+            for m in row] for row in masks]
+    dims0 = body.dims_vector(REFINED_DIMS)
+    problem = _Problem(body, cameras, sdf, clicks, dims0)
+    lo, hi = DIMS_STEP_RANGE[0] * dims0, DIMS_STEP_RANGE[1] * dims0
+    dims = dims0.copy()
+    poses = [p.copy() for p in poses]
+    cost, rms0, blocks = problem.linearize(dims, poses)
+    cost += problem.prior(dims)[0]
+    cost0, rms = cost, rms0
+    lam = 1e-3
+    done = 0
+    cancelled = False
+    for done in range(1, iterations + 1):
+        if cancel is not None and cancel():
+            cancelled = True
+            done -= 1
+            break
+        H_ff, H_fd, g_f, H_dd, g_d = blocks
+        _, g_p, H_p = problem.prior(dims)
+        H_dd, g_d = H_dd + H_p, g_d + g_p
+        accepted = False
+        while lam < 1e6:
+            A = H_ff + lam * (np.diagonal(H_ff, axis1=1, axis2=2)[:, :, None] * np.eye(H_ff.shape[1])
+                              + 1e-6 * np.eye(H_ff.shape[1]))
+            Ainv_W = np.linalg.solve(A, H_fd)                                # (K, P, D)
+            Ainv_b = np.linalg.solve(A, g_f[..., None])[..., 0]              # (K, P)
+            S = H_dd + lam * np.diag(np.diag(H_dd)) \
+                - np.einsum("kpd,kpe->de", H_fd, Ainv_W)
+            d_dims = np.linalg.solve(S, g_d - np.einsum("kpd,kp->d", H_fd, Ainv_b))
+            d_pose = Ainv_b - Ainv_W @ d_dims
+            new_dims = np.clip(dims + d_dims, lo, hi)
+            new_poses = [Pose(p.retract(d).root, body.clamp(p.retract(d).angles))
+                         for p, d in zip(poses, d_pose)]
+            new_cost, new_rms, new_blocks = problem.linearize(new_dims, new_poses)
+            new_cost += problem.prior(new_dims)[0]
+            if new_cost < cost:
+                accepted = True
+                break
+            lam *= 4.0
+        if not accepted:
+            break
+        gain = cost - new_cost
+        dims, poses, cost, rms, blocks = new_dims, new_poses, new_cost, new_rms, new_blocks
+        lam = max(lam / 3.0, 1e-7)
+        log(f"fine-tune step {done}: cost {cost:.1f}, contour RMS {rms:.2f} px")
+        if gain < 1e-4 * cost:
+            break
+    return BodyFit(problem.body_with(dims), poses, cost0, cost, (rms0, rms), done, cancelled)
+
+
+# ---------------------------------------------------------------------------------------------
+# Fine-tuning a tracked take
+# ---------------------------------------------------------------------------------------------
+
+@dataclass
+class FinetuneResult:
+    """What :func:`finetune` did.
+
+    Attributes
+    ----------
+    result : TrackResult
+        The better of the first track and the re-track (the first when not kept).
+    first : TrackResult
+        The track before fine-tuning.
+    retrack : TrackResult or None
+        The track with the refined body (None if it was not run).
+    body_before, body_after : BodyModel
+    kept : bool
+        The re-track was better and is ``result``.
+    measures : dict of str to dict
+        ``{"before": ..., "after": ...}`` from :func:`track_measures`.
+    fit : BodyFit or None
+    cancelled : bool
+    log : list of str
+    """
+
+    result: object
+    first: object
+    retrack: object
+    body_before: object
+    body_after: object
+    kept: bool
+    measures: dict
+    fit: object = None
+    cancelled: bool = False
+    log: list = field(default_factory=list)
+
+    def lengths(self):
+        """``{name: (before, after)}`` of the length dimensions, metres."""
+        return {n: (self.body_before.dims[n], self.body_after.dims[n]) for n in LENGTH_DIMS}
+
+
+def track_measures(result):
+    """The tracker's own measures of a result, over the frames it tracked (not the anchors).
+
+    Returns
+    -------
+    measures : dict
+        ``iou`` and ``fit``: mean silhouette overlap and fit (NaN without silhouettes);
+        ``residual``: median grey residual over views and frames; ``ok``, ``uncertain``,
+        ``lost``: status counts.
+    """
+    anchors = set(result.extra.get("anchors", []))
+    tracked = np.array([f not in anchors for f in result.frames], bool)
+
+    def mean_of(key):
+        a = np.asarray(result.extra.get(key, []), float)
+        if a.size == 0:
+            return float("nan")
+        a = a[tracked]
+        a = a[a >= 0]
+        return float(a.mean()) if a.size else float("nan")
+
+    res = np.array([result.residual[v] for v in result.residual]).T          # (F, V)
+    res = res[tracked]
+    res = res[res > 0]
+    return {"iou": mean_of("silhouette_iou"), "fit": mean_of("silhouette_fit"),
+            "residual": float(np.median(res)) if res.size else float("nan"),
+            **{s: int(result.status.count(s)) for s in ("ok", "uncertain", "lost")}}
+
+
+def is_better(after, before):
+    """Whether a re-track is better than the first by the tracker's measures: no more frames
+    lost, no more frames lost or uncertain together, and a higher silhouette overlap (or, with
+    no silhouettes, a lower grey residual)."""
+    if after["lost"] > before["lost"] or \
+            after["lost"] + after["uncertain"] > before["lost"] + before["uncertain"]:
+        return False
+    if np.isfinite(after["iou"]) and np.isfinite(before["iou"]):
+        return after["iou"] > before["iou"]
+    return after["residual"] < before["residual"]
+
+
+def _sample_frames(result, n):
+    """Up to ``n`` tracked frames spread over the take, anchors first, no lost frames."""
+    anchors = [int(a) for a in result.extra.get("anchors", [])]
+    usable = [int(f) for f, s in zip(result.frames, result.status) if s != "lost"]
+    rest = [f for f in usable if f not in anchors]
+    k = max(n - len(anchors), 0)
+    pick = [rest[i] for i in np.unique(np.linspace(0, len(rest) - 1, k).astype(int))] \
+        if rest and k else []
+    return anchors + pick
+
+
+def finetune(plates, anchors, cameras, *, result=None, init=None, frames=None, offsets=None,
+             template="full", settings=None, max_size=960, backgrounds=None, samples=12,
+             iterations=10, progress=None, cancel=None, log=None):
+    """Track, refine the body's lengths on the images of the whole take, track again (§2.7).
+
+    Parameters
+    ----------
+    plates : dict of str to Plate
+    anchors : list of markers.Anchor
+    cameras : dict of str to PinholeCamera
+        The calibration (fine-tuning needs calibrated views).
+    result : TrackResult, optional
+        A first track of these plates (its ``body`` must be ``init.body``); tracked here when
+        not given.
+    init : track.Initial, optional
+        Starting poses and body; by default fitted to the anchors' clicks.
+    frames, offsets, template, settings, max_size
+        As for :func:`track.track`.
+    backgrounds : dict of str to BackgroundModel or array, optional
+        Known backgrounds (clean plates, BGR) per view; by default estimated from the plates
+        with the person, as the first track placed it, left out.
+    samples : int
+        Frames the lengths are fitted on (anchors included), spread over the take.
+    iterations : int
+        Steps of the fit.
+    progress : callable(done, total), optional
+        Over the whole job: first track, fit, re-track.
+    cancel : callable() -> bool, optional
+        On cancel the work done is kept: the first track (partial or whole) if the cancel came
+        before the re-track finished.
+    log : callable(str), optional
+
+    Returns
+    -------
+    FinetuneResult
+
+    Raises
+    ------
+    ZoopraxisError
+        No calibration, a view without a camera, bad anchors or frames (as :func:`track.track`).
+    """
+    from . import track as T
+    from .differential import Settings
+    from .initialize import initialize
+
+    lines = []
+
+    def say(msg):
+        lines.append(msg)
+        if log is not None:
+            log(msg)
+
+    if not cameras:
+        raise ZoopraxisError("body fine-tuning needs calibrated views: give a calibration")
+    views = list(plates)
+    missing = [v for v in views if v not in cameras]
+    if missing:
+        raise ZoopraxisError(f"body fine-tuning: the calibration has no camera for view "
+                             f"'{missing[0]}'")
+    offsets = dict(offsets or {})
+    settings = settings or Settings()
+    from .plates import check_same_length
+
+    n_total = check_same_length(plates, offsets)
+    frames = range(0, n_total) if frames is None else frames
+    inside = [a for a in anchors if frames.start <= a.frame < frames.stop]
+    if init is None and inside:
+        res = initialize(inside, {v: cameras[v] for v in views}, template=template,
+                         calibrated=True, views=views)
+        init = T.Initial(res.body, res.poses, res.cameras, None, list(res.warnings))
+    # Progress over the whole job: a track's steps, the fit's steps, the re-track's steps.
+    stage = {"base": 0, "steps": None}
+
+    def staged(done, total):
+        stage["steps"] = stage["steps"] or total
+        if progress is not None:
+            grand = 2 * stage["steps"] + iterations
+            progress(min(stage["base"] + done, grand), grand)
+
+    def track_once(start):
+        return T.track(plates, anchors, cameras, frames=frames, offsets=offsets,
+                       template=template, settings=settings, init=start, max_size=max_size,
+                       progress=staged, cancel=cancel, log=log)
+
+    first = result if result is not None else track_once(init)
+    body0 = init.body
+    before = track_measures(first)
+
+    def finish(kept_result, retrack, body_after, kept, after=None, fit=None, cancelled=False):
+        return FinetuneResult(kept_result, first, retrack, body0, body_after, kept,
+                              {"before": before, "after": after}, fit, cancelled, lines)
+
+    if first.extra.get("cancelled"):
+        say("fine-tune: cancelled during the first track; keeping it")
+        return finish(first, None, body0, False, cancelled=True)
+    stage["steps"] = stage["steps"] or max(len(first.frames) - 1, 1)
+    stage["base"] = stage["steps"]
+
+    # Working resolution, as the tracker's.
+    factors = {v: min(1.0, max_size / max(plates[v].image_size)) for v in views}
+    work = [cameras[v].scaled(factors[v], sampling="resize") if factors[v] != 1.0 else cameras[v]
+            for v in views]
+    source = T.FrameSource(plates, views, offsets, factors)
+    index = {int(f): i for i, f in enumerate(first.frames)}
+    pose_of = {f: Pose(first.roots[i], first.angles[i]) for f, i in index.items()}
+    picked = _sample_frames(first, samples)
+    say(f"fine-tune: fitting the lengths on {len(picked)} frames x {len(views)} views")
+    models = _backgrounds(backgrounds, views, source, body0, work, pose_of, factors)
+    masks = [[None if models[c] is None else models[c].foreground(img)
+              for c, img in enumerate(source.colour(f))] for f in picked]
+    by_frame = {a.frame: a for a in inside}
+    clicks = []
+    for f in picked:
+        uv = np.full((len(views), 17, 2), np.nan)
+        if f in by_frame:
+            for c, v in enumerate(views):
+                uv[c] = by_frame[f].array(v) * factors[v]
+        clicks.append(uv)
+
+    def fit_progress_cancel():
+        staged(0, stage["steps"])
+        stage["base"] += 1
+        return cancel is not None and cancel()
+
+    fit = fit_body_to_images(body0, [pose_of[f] for f in picked], work, masks, clicks,
+                             iterations=iterations, cancel=fit_progress_cancel, log=say)
+    body1 = fit.body
+    say("fine-tune: lengths " + ", ".join(
+        f"{n} {1000 * body0.dims[n]:.0f}->{1000 * body1.dims[n]:.0f} mm"
+        for n in LENGTH_DIMS if abs(body1.dims[n] - body0.dims[n]) >= 5e-4) +
+        f"; contour RMS {fit.contour_rms[0]:.2f} -> {fit.contour_rms[1]:.2f} px")
+    if fit.cancelled:
+        say("fine-tune: cancelled; keeping the first track")
+        return finish(first, None, body1, False, fit=fit, cancelled=True)
+    refined = dict(zip(picked, fit.poses))
+    start = T.Initial(body1, {a.frame: refined[a.frame] for a in inside}, dict(cameras), None,
+                      [])
+    stage["base"] = stage["steps"] + iterations
+    second = track_once(start)
+    if second.extra.get("cancelled"):
+        say("fine-tune: cancelled during the re-track; keeping the first track")
+        return finish(first, second, body1, False, fit=fit, cancelled=True)
+    after = track_measures(second)
+    kept = is_better(after, before)
+    say(f"fine-tune: silhouette overlap {before['iou']:.3f} -> {after['iou']:.3f}, lost "
+        f"{before['lost']} -> {after['lost']}, uncertain {before['uncertain']} -> "
+        f"{after['uncertain']}: {'keeping the re-track' if kept else 'keeping the first track'}")
+    return finish(second if kept else first, second, body1, kept, after, fit)
+
+
+def _backgrounds(given, views, source, body, cameras, pose_of, factors):
+    """Background model per view: given (clean plates) or estimated from up to 25 frames with
+    the person, where the first track put it (dilated), left out."""
+    out = []
+    frames = sorted(pose_of)
+    sample_frames = [frames[i] for i in np.unique(
+        np.linspace(0, len(frames) - 1, min(25, len(frames))).astype(int))]
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (15, 15))
+    prims = None
+    for c, v in enumerate(views):
+        if given is not None and v in given:
+            bg = given[v]
+            if not isinstance(bg, BackgroundModel):
+                img = np.asarray(bg)
+                f = factors[v]
+                if f != 1.0:
+                    h, w = img.shape[:2]
+                    img = cv2.resize(img, (int(round(w * f)), int(round(h * f))),
+                                     interpolation=cv2.INTER_AREA)
+                img = img.astype(np.float32) / (255.0 if img.dtype == np.uint8 else 1.0)
+                bg = BackgroundModel(img, 0.01, None)
+            out.append(bg)
+            continue
+        if len(sample_frames) < 5:
+            out.append(None)
+            continue
+        if prims is None:
+            prims = body.primitives()
+        imgs, exclude = [], []
+        for f in sample_frames:
+            img = source.colour(f)[c]
+            rr = render(cameras[c], body.seg2world(pose_of[f]), prims, want=())
+            imgs.append(img)
+            exclude.append((img, cv2.dilate((rr.label >= 0).astype(np.uint8), kernel) > 0))
+        out.append(estimate_background(imgs, exclude=exclude))
+    return out
+
+
+__all__ = ["finetune", "FinetuneResult", "fit_body_to_images", "BodyFit", "track_measures",
+           "is_better"]
