@@ -393,9 +393,14 @@ def is_better(after, before):
 
 
 def _sample_frames(result, n):
-    """Up to ``n`` tracked frames spread over the take, anchors first, no lost frames."""
+    """Up to ``n`` tracked frames spread over the take, anchors first: frames whose status is
+    ok (a pose that drifted would teach the lengths its error), or if there are fewer than
+    three of those, all frames not lost."""
     anchors = [int(a) for a in result.extra.get("anchors", [])]
-    usable = [int(f) for f, s in zip(result.frames, result.status) if s != "lost"]
+    for allowed in (("ok",), ("ok", "uncertain")):
+        usable = [int(f) for f, s in zip(result.frames, result.status) if s in allowed]
+        if len(usable) >= 3:
+            break
     rest = [f for f in usable if f not in anchors]
     k = max(n - len(anchors), 0)
     pick = [rest[i] for i in np.unique(np.linspace(0, len(rest) - 1, k).astype(int))] \
