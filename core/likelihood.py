@@ -33,6 +33,16 @@ Two refinements of the printed equations, both in the paper's spirit:
 
 Images are grey, 0..255, smoothed by a Gaussian of standard deviation sqrt(2) (§5).
 
+An optional silhouette cue, not in the paper, anchors the appearance: the appearance is the
+previous estimate's own image, so an estimate that slips a little is matched against where it
+slipped to, and the error accumulates (drift). Given a foreground mask per view
+(:meth:`ImageLikelihood.set_foreground`, from a background model), every compared point should
+fall on the foreground, and foreground pixels drawn from the mask should fall inside some
+limb's silhouette (the capsules of the occlusion test); each point and pixel contributes
+``silhouette * log(floor + (1 - floor) m)``, ``m`` the (softened) mask value or whether a
+capsule covers the pixel. The second half makes the cue two-sided: a limb the model misses
+leaves foreground uncovered.
+
 Convention: world Z up, metres; cameras ``X_c = R @ X_w + t`` with OpenCV axes and pixels.
 ``seg2world`` arrays map each segment's reference-frame coordinates into the world (see
 :mod:`body`). A point is a basis vector of 6 numbers that a (3, 6) matrix per limb and particle
@@ -196,11 +206,27 @@ class LikelihoodResult:
         2.5 sigma: near 1 when the appearance moves with the particle, near 0 when lost.
     compared : array, shape (N,)
         Share of the points that were visible and inside the images (sum of ``q`` over points).
+    per_segment : array, shape (N, S)
+        The appearance terms of ``log_likelihood`` (with the silhouette cue of the limbs'
+        points) split by the segment the points lie on (eq. 12's factors, summed over views).
+    coverage : array, shape (N,)
+        The silhouette cue's foreground-coverage term (0 without foreground masks);
+        ``log_likelihood`` is ``per_segment.sum(axis=1) + coverage``.
+    covered : array, shape (N,)
+        Share of the drawn foreground pixels that the particle's limbs cover (NaN without
+        foreground masks).
+    on_foreground : array, shape (N, S)
+        Per segment, the mean foreground mask value at its points (the share of them that
+        fall on the foreground); NaN for segments without points or without masks.
     """
 
     log_likelihood: np.ndarray
     inliers: np.ndarray
     compared: np.ndarray
+    per_segment: np.ndarray
+    coverage: np.ndarray
+    covered: np.ndarray
+    on_foreground: np.ndarray
 
 
 def _empty_pool():
@@ -248,13 +274,21 @@ class ImageLikelihood:
     occlusion_margin : float
         Pixels by which a limb must clear an occluder's silhouette at the reference before
         their occlusion test is skipped for all particles (particles stay near the reference).
+    silhouette : float
+        Weight of the silhouette cue per point and foreground pixel (module docstring); it
+        applies only while foreground masks are set.
+    silhouette_points : int
+        Foreground pixels drawn per view and frame for the coverage half of the cue.
+    silhouette_floor : float
+        Likelihood of a point off the foreground (or an uncovered pixel) relative to one on it.
     seed : int
         Seed of the pixel draws.
     """
 
     def __init__(self, body, cameras, *, sigma_image=4.0, epsilon=0.1, p_occluded=None,
                  n_points=40, beta=1.0, surface="attached", min_pixels=12, min_cos=0.2,
-                 appearance_rate=0.5, keep_frames=4, occlusion_margin=12.0, seed=0):
+                 appearance_rate=0.5, keep_frames=4, occlusion_margin=12.0, silhouette=0.5,
+                 silhouette_points=200, silhouette_floor=0.1, seed=0):
         if not cameras:
             raise ZoopraxisError("ImageLikelihood: no cameras given")
         for cam in cameras:
@@ -288,9 +322,17 @@ class ImageLikelihood:
         self.appearance_rate = float(appearance_rate)
         self.keep_frames = int(keep_frames)
         self.occlusion_margin = float(occlusion_margin)
+        if not silhouette >= 0 or not 0 < silhouette_floor < 1 or silhouette_points < 1:
+            raise ZoopraxisError("ImageLikelihood: need silhouette >= 0, 0 < silhouette_floor "
+                                 "< 1 and silhouette_points >= 1")
+        self.silhouette = float(silhouette)
+        self.silhouette_points = int(silhouette_points)
+        self.silhouette_floor = float(silhouette_floor)
+        self._foreground = [None] * len(self.cameras)
         self.rng = np.random.default_rng(seed)
         self._pools = None
         self.surfaces = None
+        self._subsets = {}
 
     # -- the appearance: where to look and what to expect -----------------------------------
 
@@ -322,11 +364,47 @@ class ImageLikelihood:
                                                      self._check_image(cam, image),
                                                      self._pools[v])
             self.surfaces.append(surf)
+        self._subsets = {}
 
     def reset(self):
         """Forget the appearance (a new track starts from the next reference)."""
         self._pools = None
         self.surfaces = None
+        self._foreground = [None] * len(self.cameras)
+
+    def set_foreground(self, masks):
+        """Foreground masks of the frame being weighed, for the silhouette cue.
+
+        Parameters
+        ----------
+        masks : list of (array of bool, shape (H, W), or None), or None
+            One per view (None: no cue in that view); None switches the cue off.
+        """
+        if masks is None:
+            self._foreground = [None] * len(self.cameras)
+            return
+        if len(masks) != len(self.cameras):
+            raise ZoopraxisError(f"ImageLikelihood: {len(self.cameras)} views but "
+                                 f"{len(masks)} foreground masks")
+        out = []
+        for cam, mask in zip(self.cameras, masks):
+            if mask is None or self.silhouette == 0:
+                out.append(None)
+                continue
+            mask = np.asarray(mask, bool)
+            if mask.shape != (cam.height, cam.width):
+                raise ZoopraxisError(f"view '{cam.name}': foreground mask is {mask.shape[1]}x"
+                                     f"{mask.shape[0]}, the camera expects "
+                                     f"{cam.width}x{cam.height}")
+            rows, cols = np.nonzero(mask)
+            if rows.size == 0:
+                out.append(None)
+                continue
+            pick = self.rng.integers(0, rows.size, self.silhouette_points)
+            # Softened so that a point a pixel off the edge is not treated as far outside.
+            soft = cv2.GaussianBlur(mask.astype(np.float32), (0, 0), 1.5)
+            out.append((soft, cols[pick].astype(np.float32), rows[pick].astype(np.float32)))
+        self._foreground = out
 
     @staticmethod
     def _check_image(cam, image):
@@ -647,7 +725,21 @@ class ImageLikelihood:
 
     # -- the likelihood ---------------------------------------------------------------------
 
-    def evaluate(self, images, seg2world, previous=None):
+    def _surfaces_of(self, segments):
+        """Per view, the compared points that lie on the given segments (cached per
+        reference)."""
+        key = tuple(sorted(int(k) for k in segments))
+        if key not in self._subsets:
+            subsets = []
+            for surf in self.surfaces:
+                keep = np.zeros(surf.n_points, bool)
+                for (k, _), sl in zip(surf.groups, surf.slices):
+                    keep[sl] = k in key
+                subsets.append(self._subset(surf, keep))
+            self._subsets[key] = subsets
+        return self._subsets[key]
+
+    def evaluate(self, images, seg2world, previous=None, segments=None):
         """Log-likelihood of every particle (eqs. 3, 4, 10-12).
 
         Parameters
@@ -661,6 +753,9 @@ class ImageLikelihood:
             its appearance from I(t-1) at its own previous pose, as the paper's filter does
             (§4.1: "for each state sample from time t-1, we compute R_t"); by default all
             particles share the appearance mapped at the reference (:meth:`set_reference`).
+        segments : sequence of int, optional
+            Compare only the points on these segments (the factors of eq. 12 that a change of
+            some limbs' angles can alter); default all.
 
         Returns
         -------
@@ -678,25 +773,86 @@ class ImageLikelihood:
             if np.shape(seg2world_prev) != seg2world.shape:
                 raise ZoopraxisError(f"ImageLikelihood: {np.shape(seg2world_prev)} previous "
                                      f"poses for {seg2world.shape} particles")
-        ll = np.zeros(N)
+        surfaces = self.surfaces if segments is None else self._surfaces_of(segments)
+        per_segment = np.zeros((N, self.body.n_segments))
+        coverage = np.zeros(N)
+        covered = np.zeros(N)
+        fg_sum = np.zeros((N, self.body.n_segments))
+        fg_count = np.zeros(self.body.n_segments)
+        n_fg = 0
         good = np.zeros(N)
         weight = np.zeros(N)
         total = 0
-        for v, (cam, surf, image) in enumerate(zip(self.cameras, self.surfaces, images)):
+        for v, (cam, surf, image) in enumerate(zip(self.cameras, surfaces, images)):
             if surf.n_points == 0:
                 continue
             self._check_image(cam, image)
             total += surf.n_points
+            if self._foreground[v] is not None:
+                fg_count += np.bincount(np.repeat(surf.segments, [sl.stop - sl.start
+                                                                  for sl in surf.slices]),
+                                        minlength=self.body.n_segments)
             for start in range(0, N, _CHUNK):
                 part = slice(start, min(start + _CHUNK, N))
                 prev = None if previous is None else \
                     (self._check_image(cam, images_prev[v]), seg2world_prev[part])
-                a, b, c = self._view(cam, surf, image, seg2world[part], prev)
-                ll[part] += a
+                a, b, c, m = self._view(cam, surf, image, seg2world[part], prev,
+                                        self._foreground[v])
+                per_segment[part] += a
+                if m is not None:
+                    fg_sum[part] += m
                 good[part] += b
                 weight[part] += c
+        for cam, fg in zip(self.cameras, self._foreground):
+            if fg is None:
+                continue
+            n_fg += len(fg[1])
+            for start in range(0, N, _CHUNK):
+                part = slice(start, min(start + _CHUNK, N))
+                hit = self._covered(cam, seg2world[part], fg[1], fg[2])
+                covered[part] += hit.sum(axis=1)
+                floor = self.silhouette_floor
+                coverage[part] += self.silhouette * np.log(floor + (1 - floor) * hit).sum(
+                    axis=1, dtype=np.float64)
         inliers = good / np.maximum(weight, 1e-12)
-        return LikelihoodResult(self.beta * ll, inliers, weight / max(total, 1))
+        per_segment *= self.beta
+        coverage *= self.beta
+        covered = covered / n_fg if n_fg else np.full(N, np.nan)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            on_foreground = np.where(fg_count > 0, fg_sum / fg_count, np.nan)
+        return LikelihoodResult(per_segment.sum(axis=1) + coverage, inliers,
+                                weight / max(total, 1), per_segment, coverage, covered,
+                                on_foreground)
+
+    def coverage_of(self, seg2world):
+        """Share of the drawn foreground pixels (all views) that the limbs of each pose cover.
+
+        Parameters
+        ----------
+        seg2world : array, shape (N, S, 4, 4)
+
+        Returns
+        -------
+        covered : array, shape (N,)
+            NaN without foreground masks (:meth:`set_foreground`).
+        """
+        seg2world = np.asarray(seg2world)
+        hits, count = np.zeros(seg2world.shape[0]), 0
+        for cam, fg in zip(self.cameras, self._foreground):
+            if fg is not None:
+                hits += self._covered(cam, seg2world, fg[1], fg[2]).sum(axis=1)
+                count += len(fg[1])
+        return hits / count if count else np.full(len(hits), np.nan)
+
+    def _covered(self, cam, seg2world, u, v):
+        """Whether some limb's capsule covers each pixel, (N, K) float32."""
+        C = self._cam_from_seg(cam, seg2world)
+        hit = np.zeros((C.shape[0], len(u)), bool)
+        for o in range(len(self.occluders.segment)):
+            dist2, radius, _ = self._capsule_distance(self._capsule(cam, C, o), u[None],
+                                                      v[None])
+            hit |= dist2 < radius * radius
+        return hit.astype(np.float32)
 
     @staticmethod
     def _sample(image, geometry):
@@ -710,7 +866,7 @@ class ImageLikelihood:
                            borderValue=0.0)
         return values, inside
 
-    def _view(self, cam, surf, image, seg2world, previous=None):
+    def _view(self, cam, surf, image, seg2world, previous=None, foreground=None):
         now = self._project(cam, seg2world, surf, normals=True)
         predicted, inside = self._sample(image, now)
         if previous is None:
@@ -729,9 +885,21 @@ class ImageLikelihood:
         eps = self.epsilon
         gauss = np.float32((1.0 - eps) / np.sqrt(2.0 * np.pi)) * inv_sigma * np.exp(-0.5 * r2)
         p = q * (gauss + np.float32(eps / 256.0)) + (1.0 - q) * np.float32(self.p_occluded)
-        ll = np.log(p).sum(axis=1, dtype=np.float64)
+        logp = np.log(p)
+        on_fg = None
+        if foreground is not None:
+            m, _ = self._sample(foreground[0], now)
+            floor = np.float32(self.silhouette_floor)
+            logp += np.float32(self.silhouette) * np.log(floor + (1 - floor) * m)
+        # Sums per group of points, then per segment (a segment may have several groups).
+        starts = [sl.start for sl in surf.slices]
+        by_group = np.add.reduceat(logp, starts, axis=1, dtype=np.float64)
+        owner = np.zeros((len(starts), self.body.n_segments))
+        owner[np.arange(len(starts)), surf.segments] = 1.0
+        if foreground is not None:
+            on_fg = np.add.reduceat(m, starts, axis=1, dtype=np.float64) @ owner
         good = np.sum(q * (r2 < 6.25), axis=1, dtype=np.float64)
-        return ll, good, np.sum(q, axis=1, dtype=np.float64)
+        return by_group @ owner, good, np.sum(q, axis=1, dtype=np.float64), on_fg
 
 
 __all__ = ["ImageLikelihood", "LikelihoodResult", "SurfacePoints", "Occluders",

@@ -211,6 +211,42 @@ class SmoothMotionPrior:
         return {"t": t, "R": R, "angles": angles, "dt": state["dt"] + v[:, :3],
                 "dr": state["dr"] + v[:, 3:6], "dangles": state["dangles"] + v[:, 6:]}
 
+    def perturb(self, state, cols, scale, rng):
+        """Move some pose parameters of every particle by Gaussian noise (annealing layers).
+
+        The noise is ``scale`` times the prior's own per-frame position noise, in the pose
+        parameters ``cols`` only (:func:`param_names` order; rotations on the left, in world
+        axes); joint limits stay hard. The velocities stay: a move that fits this frame's
+        image noise would otherwise carry on into every later prediction (tried: the tracks
+        drift twice as far).
+
+        Parameters
+        ----------
+        state : dict of arrays
+        cols : array of int
+        scale : float
+        rng : numpy.random.Generator
+
+        Returns
+        -------
+        state : dict of arrays
+            A new dict (the arrays of ``state`` are not changed).
+        """
+        n = state["t"].shape[0]
+        P = 6 + self.body.n_dofs
+        d = np.zeros((n, P))
+        cols = np.asarray(cols, int)
+        d[:, cols] = rng.normal(size=(n, len(cols))) * (scale * self.sigma_position[cols])
+        out = dict(state)
+        if np.any(cols < 6):
+            out["t"] = state["t"] + d[:, :3]
+            out["R"] = se3.exp_so3(d[:, 3:6]) @ state["R"]
+        mean = state["angles"]
+        angles = self._inside_limits(mean + d[:, 6:], mean, scale * self.sigma_position[6:],
+                                     rng)
+        out["angles"] = angles
+        return out
+
     def _inside_limits(self, angles, mean, sigma, rng):
         """Redraw the components outside the limits (a truncated Gaussian), then clip."""
         lo, hi = self.body.lower, self.body.upper
@@ -599,9 +635,15 @@ class WalkingPrior:
       times the phase step, ``tau_t = tau_{t-1} + v(mu, c) rate R [0, -1, 0] + N(0, s_tau^2)``;
     - eq. (17): the heading turns by its angular velocity plus noise (smooth motion).
 
-    Joint angles are the curves at the new phase, ``theta^l = A*(mu_t)`` (clipped to the
-    limits); DOFs the model lacks keep their initial values. The root is
-    ``R exp(tilt(mu, c))`` at ``t + R [sway, 0, bob]``.
+    Joint angles are the curves at the new phase, ``theta^l = A*(mu_t)``, plus a per-DOF
+    ``offset`` (n, n_dofs), clipped to the limits; DOFs the model lacks take their initial
+    values plus the offset. The offsets are this implementation's addition to the paper's
+    prior: a few eigencurves learned from a few walkers do not hold another walker's style
+    (the arms held higher, a longer stride), so each angle may leave the learned cycle by a
+    slowly varying amount, a random walk of ``sigma_offset`` per frame drawn back towards
+    zero by ``offset_pull`` of itself per frame. They start at the initial pose's own
+    mismatch to the cycle. With ``sigma_offset=0`` the prior is the paper's.
+    The root is ``R exp(tilt(mu, c))`` at ``t + R [sway, 0, bob]``.
 
     Parameters
     ----------
@@ -620,10 +662,15 @@ class WalkingPrior:
         Path noise per frame, metres.
     sigma_turn : float or array, shape (3,)
         Angular-velocity noise of the heading per frame (radians); 0 holds the heading fixed.
+    sigma_offset : float or array, shape (n_dofs,)
+        Per-frame noise of the angle offsets from the cycle, radians.
+    offset_pull : float
+        Share of its offset an angle gives back per frame, 0 to 1.
     """
 
     def __init__(self, body, model=None, *, fps=_REFERENCE_FPS, eps=0.1, sigma_phase=0.005,
-                 sigma_rate=0.0002, sigma_path=0.01, sigma_turn=(0.0, 0.0, 0.005)):
+                 sigma_rate=0.0002, sigma_path=0.01, sigma_turn=(0.0, 0.0, 0.005),
+                 sigma_offset=0.0, offset_pull=0.0):
         self.body = body
         self.model = WalkModel.load() if model is None else model
         self.fps = float(fps)
@@ -640,6 +687,13 @@ class WalkingPrior:
         self.sigma_rate = float(sigma_rate)
         self.sigma_path = np.broadcast_to(np.asarray(sigma_path, float), (3,)).copy()
         self.sigma_turn = np.broadcast_to(np.asarray(sigma_turn, float), (3,)).copy()
+        self.sigma_offset = np.broadcast_to(np.asarray(sigma_offset, float),
+                                            (body.n_dofs,)).copy()
+        if np.any(~np.isfinite(self.sigma_offset)) or np.any(self.sigma_offset < 0) \
+                or not 0 <= offset_pull <= 1:
+            raise ZoopraxisError("WalkingPrior: sigma_offset must be >= 0 and offset_pull "
+                                 "in [0, 1]")
+        self.offset_pull = float(offset_pull)
 
     @property
     def default_rate(self):
@@ -712,9 +766,13 @@ class WalkingPrior:
         offset = heading @ (self.scale * np.array([root_curves[0, 1], 0.0, root_curves[0, 2]]))
         t = pose.root[:3, 3] - offset + rng.normal(size=(n, 3)) * s["t"]
         R = se3.exp_so3(rng.normal(size=(n, 3)) * s["r"] * (self.sigma_turn > 0)) @ heading
+        offset = np.zeros((n, self.body.n_dofs))
+        if np.any(self.sigma_offset > 0):
+            dof_curves, _ = self._curves(np.array([phase]), np.asarray(coefficients)[None])
+            offset[:, self._dofs] = pose.angles[self._dofs] - dof_curves[0]
         return {"c": c, "phase": mu, "rate": rates, "t": t, "R": R,
                 "dr": np.zeros((n, 3)), "rest": np.broadcast_to(pose.angles, (n, len(
-                    pose.angles))).copy()}
+                    pose.angles))).copy(), "offset": offset}
 
     def propagate(self, state, rng):
         """Draw the next frame's particles (eqs. 14-17); see the class docstring."""
@@ -729,15 +787,50 @@ class WalkingPrior:
         rate = np.maximum(step + rng.normal(size=n) * self.sigma_rate, 0.0)
         dr = state["dr"] + rng.normal(size=(n, 3)) * self.sigma_turn
         R = se3.exp_so3(state["dr"]) @ state["R"]
+        offset = state["offset"]
+        if np.any(self.sigma_offset > 0):
+            offset = (1.0 - self.offset_pull) * offset \
+                + rng.normal(size=offset.shape) * self.sigma_offset
         return {"c": c, "phase": phase, "rate": rate, "t": t, "R": R, "dr": dr,
-                "rest": state["rest"]}
+                "rest": state["rest"], "offset": offset}
+
+    def perturb(self, state, cols, scale, rng):
+        """Move some pose parameters of every particle by Gaussian noise (annealing layers).
+
+        Root parameters (``cols`` below 6) move the walk itself: the path by ``sigma_path``,
+        the heading by ``sigma_turn``, the phase by ``sigma_phase`` and the coefficients by
+        ``eps * coef_std``; DOF columns move those angles' offsets by ``sigma_offset``; all
+        noise is ``scale`` times the per-frame value.
+
+        Returns
+        -------
+        state : dict of arrays
+            A new dict (the arrays of ``state`` are not changed).
+        """
+        n, d = state["c"].shape
+        cols = np.asarray(cols, int)
+        out = dict(state)
+        if np.any(cols < 6):
+            out["t"] = state["t"] + rng.normal(size=(n, 3)) * (scale * self.sigma_path)
+            out["R"] = se3.exp_so3(rng.normal(size=(n, 3)) * (scale * self.sigma_turn)) \
+                @ state["R"]
+            out["phase"] = state["phase"] + rng.normal(size=n) * (scale * self.sigma_phase)
+            out["c"] = state["c"] + rng.normal(size=(n, d)) * (scale * self.eps
+                                                                * self.model.coef_std)
+        dofs = cols[cols >= 6] - 6
+        if dofs.size and np.any(self.sigma_offset[dofs] > 0):
+            offset = state["offset"].copy()
+            offset[:, dofs] += rng.normal(size=(n, dofs.size)) * (scale
+                                                                  * self.sigma_offset[dofs])
+            out["offset"] = offset
+        return out
 
     def poses(self, state):
         """Root transforms (n, 4, 4) and angles (n, n_dofs) of the particles."""
         dof_curves, root_curves = self._curves(state["phase"], state["c"])
         angles = state["rest"].copy()
         angles[:, self._dofs] = dof_curves
-        angles = self.body.clamp(angles)
+        angles = self.body.clamp(angles + state["offset"])
         n = len(angles)
         offset = np.zeros((n, 3))
         offset[:, 0] = self.scale * root_curves[:, 1]

@@ -109,6 +109,45 @@ class BatchKinematics:
             + T[:, :, :3, 3]
 
 
+def partitions(body):
+    """Pose parameters that move limbs independently, and the segments each moves.
+
+    The likelihood is a product over limbs (eq. 12), and a leg's angles change only the leg's
+    factors: partitioned sampling (MacCormick & Isard) can search the leg with the rest held.
+    The partition: the root (all segments), the trunk and neck angles (the segments above the
+    pelvis), then each leg and each arm; parents before children.
+
+    Parameters
+    ----------
+    body : BodyModel
+
+    Returns
+    -------
+    groups : list of (array of int, array of int)
+        Pose parameter columns (:func:`motion_prior.param_names` order) and the segments
+        whose pose they change (the DOFs' segments and all their descendants).
+    """
+    below = [{k} for k in range(body.n_segments)]
+    for k in range(body.n_segments - 1, -1, -1):        # parents precede their children
+        parent = body.segment_parents[k]
+        if parent >= 0:
+            below[parent] |= below[k]
+    groups = [(np.arange(6), np.arange(body.n_segments))]
+    parts = [("lumbar", "thorax", "neck")]
+    for limb in (("hip", "knee", "ankle"), ("shoulder", "elbow")):
+        for side in "lr":
+            parts.append(tuple(f"{side}_{j}" for j in limb))
+    for prefixes in parts:
+        dofs = [i for i, name in enumerate(body.dof_names) if name.startswith(prefixes)]
+        if not dofs:
+            continue
+        segments = set()
+        for i in dofs:
+            segments |= below[body.dof_segment[i]]
+        groups.append((6 + np.array(dofs), np.array(sorted(segments))))
+    return groups
+
+
 def systematic_resample(weights, rng):
     """Indices of N draws from the weights by systematic (low-variance) resampling.
 
@@ -288,6 +327,18 @@ class ParticleFilter:
         likelihood is tempered (:func:`tempered_weights`); 0 for the plain filter.
     lost_inliers, uncertain_spread : float
         Thresholds of :attr:`FilterStep.status`.
+    layers : int
+        Annealing passes per frame after the plain SIR step (0: the plain filter). A few
+        thousand particles over 35 parameters rarely draw every limb right at once; each pass
+        goes through the :func:`partitions` in turn (partitioned sampling, MacCormick &
+        Isard, inside the layers of Deutscher et al.'s annealed filter): resample by the
+        likelihood tempered to ``layer_ess`` (:func:`tempered_weights`), move that group's
+        parameters by ``prior.perturb`` (the prior's own per-frame noise times
+        ``layer_scale``, halved each pass), and weigh again only the limbs it moves. The
+        frame's weights come from a last weighing of the whole body. Each pass costs about
+        two weighings of all particles. The annealed posterior is narrower than the true one.
+    layer_scale, layer_ess : float
+        See ``layers``.
     **likelihood_options
         Passed to :class:`ImageLikelihood` (``sigma_image``, ``n_points``, ``surface``,
         ``appearance_rate``, ...).
@@ -295,7 +346,8 @@ class ParticleFilter:
 
     def __init__(self, body, cameras, prior, *, n_particles=1000, seed=0, likelihood=None,
                  appearance="estimate", min_ess=0.1, lost_inliers=0.3,
-                 uncertain_spread=0.08, **likelihood_options):
+                 uncertain_spread=0.08, layers=0, layer_scale=1.0, layer_ess=0.5,
+                 **likelihood_options):
         if int(n_particles) != n_particles or n_particles < 1:
             raise ZoopraxisError(f"ParticleFilter: n_particles must be a positive whole number, "
                                  f"got {n_particles!r}")
@@ -317,6 +369,17 @@ class ParticleFilter:
         self.temper = 1.0
         self.lost_inliers = float(lost_inliers)
         self.uncertain_spread = float(uncertain_spread)
+        if int(layers) != layers or layers < 0 or not layer_scale > 0 \
+                or not 0 < layer_ess <= 1:
+            raise ZoopraxisError(f"ParticleFilter: need layers >= 0 (whole), layer_scale > 0 "
+                                 f"and 0 < layer_ess <= 1, got {layers}, {layer_scale}, "
+                                 f"{layer_ess}")
+        if layers and not hasattr(prior, "perturb"):
+            raise ZoopraxisError("ParticleFilter: annealing layers need a prior with perturb()")
+        self.layers = int(layers)
+        self.layer_scale = float(layer_scale)
+        self.layer_ess = float(layer_ess)
+        self.groups = partitions(body)
         self.param_names = param_names(body)
         self._images = None
         self._frame = -1
@@ -366,13 +429,16 @@ class ParticleFilter:
         self.pose, spread = posterior_mean(roots, angles, self.weights)
         return self._report(roots, angles, np.zeros(self.n_particles), 1.0, spread)
 
-    def step(self, images):
+    def step(self, images, foreground=None):
         """Advance one frame: resample, predict, weigh, estimate.
 
         Parameters
         ----------
         images : list of array
             The next frame of every view.
+        foreground : list of (array of bool or None), optional
+            The frame's foreground mask per view, for the likelihood's silhouette cue
+            (:meth:`likelihood.ImageLikelihood.set_foreground`); default none.
 
         Returns
         -------
@@ -381,6 +447,7 @@ class ParticleFilter:
         if self._images is None:
             raise ZoopraxisError("ParticleFilter: call start() with the first frame first")
         images_now = self._prepare(images)
+        self.likelihood.set_foreground(foreground)
         index = systematic_resample(self.weights, self.rng)
         state = self.prior.propagate({k: v[index] for k, v in self.state.items()}, self.rng)
         roots, angles = self.prior.poses(state)
@@ -393,6 +460,10 @@ class ParticleFilter:
         previous = (self._images, self._seg2world[index]) \
             if self.appearance == "particle" else None
         result = self.likelihood.evaluate(images_now, seg2world, previous)
+        if self.layers:
+            state, seg2world, result = self._anneal(images_now, state, seg2world, previous,
+                                                    result)
+            roots, angles = self.prior.poses(state)
         ll = result.log_likelihood
         w, self.temper = tempered_weights(ll, self.min_ess)
         self.state, self._seg2world, self.weights = state, seg2world, w
@@ -400,6 +471,46 @@ class ParticleFilter:
         self._frame += 1
         self.pose, spread = posterior_mean(roots, angles, w)
         return self._report(roots, angles, ll, float(w @ result.inliers), spread)
+
+    def _anneal(self, images, state, seg2world, previous, result):
+        """The annealing passes of partitioned sampling (see ``layers``)."""
+        per_segment, coverage = result.per_segment.copy(), result.coverage
+        for layer in range(self.layers):
+            scale = self.layer_scale * 0.5 ** layer
+            for cols, segments in self.groups:
+                w, _ = tempered_weights(per_segment.sum(axis=1) + coverage, self.layer_ess)
+                index = systematic_resample(w, self.rng)
+                state = self.prior.perturb({k: v[index] for k, v in state.items()}, cols,
+                                           scale, self.rng)
+                per_segment, coverage = per_segment[index], coverage[index]
+                if previous is not None:
+                    previous = (previous[0], previous[1][index])
+                roots, angles = self.prior.poses(state)
+                seg2world = self.kinematics.seg2world(roots, angles)
+                part = self.likelihood.evaluate(images, seg2world, previous, segments=segments)
+                per_segment[:, segments] = part.per_segment[:, segments]
+                # The coverage of the foreground depends on every limb: weighed in full.
+                coverage = part.coverage
+        return state, seg2world, self.likelihood.evaluate(images, seg2world, previous)
+
+    def measure(self, roots, angles):
+        """The likelihood's full answer for given poses in the last frame :meth:`step`
+        weighed (log-likelihood, inliers, silhouette cover, ...), not tempered.
+
+        Parameters
+        ----------
+        roots : array, shape (K, 4, 4)
+        angles : array, shape (K, n_dofs)
+
+        Returns
+        -------
+        likelihood.LikelihoodResult
+        """
+        if self._frame < 1:
+            raise ZoopraxisError("ParticleFilter: measure() needs a frame weighed by step()")
+        seg2world = self.kinematics.seg2world(np.asarray(roots, float),
+                                              np.asarray(angles, float))
+        return self.likelihood.evaluate(self._images, seg2world)
 
     def score(self, roots, angles):
         """Log-likelihood of given poses in the last frame :meth:`step` weighed, with the
@@ -477,6 +588,6 @@ class ParticleFilter:
                           state=self.state)
 
 
-__all__ = ["ParticleFilter", "FilterStep", "BatchKinematics", "systematic_resample",
+__all__ = ["ParticleFilter", "FilterStep", "BatchKinematics", "systematic_resample", "partitions",
            "tempered_weights",
            "posterior_mean", "STATUSES"]

@@ -1,7 +1,14 @@
 """Learn the walking prior (Sidenbladh, Black & Fleet 2000, §6.2) from CMU walks.
 
     .venv/bin/python tools/learn_walk_prior.py [--data ../shared/data/cmu_mocap] \
-        [--takes 131_01 131_02 131_03] [--out core/data/walk_prior.npz] [--force]
+        [--takes 131_01 131_02 131_03] [--exclude TAKE ...] [--out core/data/walk_prior.npz] \
+        [--force]
+
+``--exclude`` leaves takes out (leave-one-trial-out: ``benchmarks/bench_particle.py`` tracks
+131_03's walk with a prior learned ``--exclude 131_03``, so that the prior has not seen it),
+or single cycles, ``TAKE:K`` for the K-th cycle (from 0) found in TAKE (leave-one-cycle-out).
+The CMU data beside the repository hold one subject's walks only (131_01-03; 01_01 is
+jumps), about 7 cycles of steady forward walking in all.
 
 This is how ``core/data/walk_prior.npz`` is built; run it again to rebuild it. Steps:
 
@@ -38,14 +45,23 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data" / "cmu_mocap")
     parser.add_argument("--takes", nargs="+", default=["131_01", "131_02", "131_03"])
+    parser.add_argument("--exclude", nargs="+", default=[], metavar="TAKE",
+                        help="takes to leave out (held-out evaluation)")
     parser.add_argument("--out", type=Path, default=motion_prior.DEFAULT_WALK_PRIOR)
     parser.add_argument("--force", action="store_true", help="replace an existing output")
     args = parser.parse_args(argv)
     if args.out.exists() and not args.force:
         sys.exit(f"learn_walk_prior: {args.out} exists (use --force to replace it)")
 
+    left_out = {}                                     # take -> cycle indices left out
+    for item in args.exclude:
+        name, _, index = item.partition(":")
+        if name not in args.takes or (index and not index.isdigit()):
+            sys.exit(f"learn_walk_prior: --exclude {item}: expected TAKE or TAKE:K with TAKE "
+                     f"among the takes ({' '.join(args.takes)})")
+        left_out.setdefault(name, set()).add(int(index) if index else None)
     takes = {}
-    for name in args.takes:
+    for name in [t for t in args.takes if None not in left_out.get(t, ())]:
         path = args.data / f"{name}.bvh"
         if not path.is_file():
             sys.exit(f"learn_walk_prior: {path}: no such capture")
@@ -63,6 +79,9 @@ def main(argv=None):
         found, _ = motion_prior.find_gait_cycles(joints, FPS)
         print(f"{name}: cycles at "
               f"{[(round(a / FPS, 2), round(b / FPS, 2)) for a, b in found]} s", flush=True)
+        if left_out.get(name):
+            print(f"{name}: leaving out cycles {sorted(left_out[name])}", flush=True)
+            found = [c for k, c in enumerate(found) if k not in left_out[name]]
         if not found:
             continue
         # Only the walking span needs poses (each frame starts from the previous one's fit).
@@ -85,8 +104,9 @@ def main(argv=None):
                                           cycle_seconds=float(np.mean(durations)))
     args.out.parent.mkdir(parents=True, exist_ok=True)
     model.save(args.out)
-    print(f"{len(cycles)} cycles (with mirrors), {model.n_components} eigencurves, "
-          f"mean cycle {model.cycle_seconds:.2f} s -> {args.out}")
+    print(f"{len(cycles)} cycles (with mirrors) from {' '.join(takes)}, "
+          f"{model.n_components} eigencurves, mean cycle {model.cycle_seconds:.2f} s -> {args.out}")
+    return model
 
 
 if __name__ == "__main__":

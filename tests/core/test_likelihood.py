@@ -259,3 +259,61 @@ def test_bad_settings_and_inputs(take):
         lik.set_reference(T[0], [np.zeros((90, 120), np.float32)])
     with pytest.raises(ZoopraxisError, match="1 views but 2 images"):
         lik.set_reference(T[0], [np.zeros((180, 240), np.float32)] * 2)
+
+
+# -- limbs one by one, and the silhouette -------------------------------------------------------
+
+
+def test_per_segment_terms_add_up_and_subsets_match(take, rng):
+    body, _, _, _, angles = take
+    lik = likelihood.ImageLikelihood(body, take[1][:1], seed=9)
+    trial = angles[12] + rng.normal(0, 0.05, (50, body.n_dofs))
+    full = evaluate(lik, take, 12, trial)
+    np.testing.assert_allclose(full.per_segment.sum(axis=1), full.log_likelihood, rtol=1e-12)
+    arm = [body.segment_names.index(n) for n in ("l_upper_arm", "l_forearm")]
+    assert np.all(full.per_segment[:, arm] < 0)
+    kin = BatchKinematics(body)
+    part = lik.evaluate([likelihood.prepare_image(take[2][12][0])],
+                        kin.seg2world(np.broadcast_to(take[3][12], (50, 4, 4)), trial),
+                        segments=arm)
+    np.testing.assert_allclose(part.per_segment[:, arm], full.per_segment[:, arm], rtol=1e-5)
+    others = np.setdiff1d(np.arange(body.n_segments), arm)
+    assert np.all(part.per_segment[:, others] == 0)
+
+
+def silhouette(body, camera, root, angles):
+    """Foreground mask of a pose, as a background model would find it."""
+    res = render.render(camera, body.seg2world(root, angles), body.primitives(), want=())
+    return res.label >= 0
+
+
+def test_silhouette_cue_is_two_sided(take):
+    """Points off the foreground and foreground left uncovered both lower the likelihood."""
+    body, cameras, _, roots, angles = take
+    frame = 12
+    raised = angles[frame].copy()
+    raised[body.dof_index("l_shoulder_abd")] = 1.4           # the arm out to the side
+    raised[body.dof_index("l_elbow_flex")] = 0.0
+    lowered = raised.copy()
+    lowered[body.dof_index("l_shoulder_abd")] = 0.1          # the arm down along the body
+    shifted = roots[frame].copy()
+    shifted[:3, 3] += 0.08 * cameras[0].R[0]                 # 8 cm sideways in the image
+    poses = np.stack([raised, lowered, raised])
+    trial_roots = np.stack([roots[frame], roots[frame], shifted])
+    mask = silhouette(body, cameras[0], roots[frame], raised)
+    lik = likelihood.ImageLikelihood(body, cameras[:1], silhouette=1.0, seed=10)
+    plain = evaluate(lik, take, frame, poses, roots=trial_roots)
+    assert np.all(plain.coverage == 0) and np.all(np.isnan(plain.covered))
+    lik.set_foreground([mask])
+    kin = BatchKinematics(body)
+    cue = lik.evaluate([likelihood.prepare_image(take[2][frame][0])],
+                       kin.seg2world(trial_roots, poses))
+    covered = lik.coverage_of(kin.seg2world(trial_roots, poses))
+    np.testing.assert_allclose(covered, cue.covered)
+    assert covered[0] > 0.95                                 # the capsules fill the render
+    assert covered[1] < covered[0] - 0.1                     # the arm's pixels are bare
+    assert covered[2] < covered[0] - 0.15
+    gain = cue.log_likelihood - plain.log_likelihood
+    assert np.argmax(gain) == 0 and gain[0] > gain[1] + 30 and gain[0] > gain[2] + 150
+    with pytest.raises(ZoopraxisError, match=r"view 'cam-0.87': foreground mask is 10x10"):
+        lik.set_foreground([np.zeros((10, 10), bool)])

@@ -330,7 +330,8 @@ def test_walking_prior_reproduces_the_model_cycle(body, model, rng):
     # A pose on the cycle at phase 0.25, facing +x.
     seed = {"c": c[None], "phase": np.array([0.25]), "rate": np.array([0.0]),
             "t": np.array([[0.0, 0.0, 0.9]]), "R": mp.heading_rotation([1.0, 0, 0])[None],
-            "dr": np.zeros((1, 3)), "rest": np.zeros((1, body.n_dofs))}
+            "dr": np.zeros((1, 3)), "rest": np.zeros((1, body.n_dofs)),
+            "offset": np.zeros((1, body.n_dofs))}
     roots, angles = start.poses(seed)
     pose = Pose(roots[0], angles[0])
     state = prior.init_state(pose, 1, rng, spread=quiet(), phase=0.25, coefficients=c,
@@ -358,7 +359,7 @@ def test_walking_prior_finds_the_phase_of_a_pose(body, model, rng):
     for phase in (0.2, 0.7):
         state = {"c": c[None], "phase": np.array([phase]), "rate": np.zeros(1),
                  "t": np.zeros((1, 3)), "R": np.eye(3)[None], "dr": np.zeros((1, 3)),
-                 "rest": np.zeros((1, body.n_dofs))}
+                 "rest": np.zeros((1, body.n_dofs)), "offset": np.zeros((1, body.n_dofs))}
         roots, angles = prior.poses(state)
         found, _, rms = prior.fit_pose(Pose(roots[0], angles[0]))
         assert abs((found - phase + 0.5) % 1.0 - 0.5) <= 2.0 / model.n_samples
@@ -387,3 +388,65 @@ def test_walking_prior_refuses_what_it_cannot_do(body, model, rng):
     with pytest.raises(ZoopraxisError, match="smooth-motion prior only"):
         mp.WalkingPrior(body, model).init_state(body.rest_pose(), 5, rng,
                                                 uniform={"l_shoulder_rot": (0, 1)})
+
+
+# -- annealing moves and the walking prior's offsets --------------------------------------------
+
+
+def test_smooth_prior_perturb_moves_one_group_and_its_velocity(body, rng):
+    prior = mp.SmoothMotionPrior(body)
+    state = prior.init_state(random_pose(body, rng), 500, rng)
+    cols = mp.param_index(body, ["l_hip_flex", "l_knee_flex"])
+    moved = prior.perturb(state, cols, 2.0, rng)
+    d = moved["angles"] - state["angles"]
+    others = np.setdiff1d(np.arange(body.n_dofs), cols - 6)
+    assert np.all(d[:, others] == 0)
+    np.testing.assert_allclose(moved["t"], state["t"])
+    np.testing.assert_allclose(d.std(axis=0)[cols - 6], 2.0 * prior.sigma_position[cols],
+                               rtol=0.15)
+    assert moved["dangles"] is state["dangles"]
+    assert np.all(moved["angles"] >= body.lower) and np.all(moved["angles"] <= body.upper)
+    root = prior.perturb(state, np.arange(6), 1.0, rng)
+    assert np.all(root["angles"] == state["angles"])
+    np.testing.assert_allclose((root["t"] - state["t"]).std(axis=0),
+                               prior.sigma_position[:3], rtol=0.15)
+
+
+def test_walking_prior_offsets_start_at_the_pose_and_fade(body, model, rng):
+    prior = mp.WalkingPrior(body, model, fps=30, sigma_offset=1e-6, offset_pull=0.5)
+    c = model.coef_std * 0.3
+    on_cycle = {"c": c[None], "phase": np.array([0.4]), "rate": np.zeros(1),
+                "t": np.zeros((1, 3)), "R": np.eye(3)[None], "dr": np.zeros((1, 3)),
+                "rest": np.zeros((1, body.n_dofs)), "offset": np.zeros((1, body.n_dofs))}
+    roots, angles = prior.poses(on_cycle)
+    styled = angles[0].copy()
+    styled[body.dof_index("r_shoulder_abd")] += 0.3          # the arm held out: off the cycle
+    still = {k: 0.0 for k in ("phase", "c", "rate", "t", "r")}
+    state = prior.init_state(Pose(roots[0], styled), 4, rng, spread=still)
+    np.testing.assert_allclose(prior.poses(state)[1], np.broadcast_to(styled, (4, body.n_dofs)),
+                               atol=1e-9)
+    for _ in range(10):
+        state = prior.propagate(state, rng)
+    assert np.abs(state["offset"]).max() < 0.3 * 0.5 ** 9
+    # The paper's prior (no offsets) cannot hold the arm out.
+    paper = mp.WalkingPrior(body, model, fps=30)
+    state = paper.init_state(Pose(roots[0], styled), 1, rng, spread=still)
+    assert abs(paper.poses(state)[1][0, body.dof_index("r_shoulder_abd")]
+               - styled[body.dof_index("r_shoulder_abd")]) > 0.1
+
+
+def test_walking_prior_perturb_moves_the_walk_or_the_offsets(body, model, rng):
+    prior = mp.WalkingPrior(body, model, fps=30, sigma_offset=0.02)
+    pose = Pose(*[a[0] for a in mp.WalkingPrior(body, model).poses(
+        mp.WalkingPrior(body, model).init_state(random_pose(body, rng), 1, rng))])
+    state = prior.init_state(pose, 300, rng)
+    walk = prior.perturb(state, np.arange(6), 1.0, rng)
+    assert np.all(walk["offset"] == state["offset"])
+    assert np.all(walk["phase"] != state["phase"]) and np.all(walk["c"] != state["c"])
+    arm = mp.param_index(body, ["l_shoulder_flex", "l_elbow_flex"])
+    limb = prior.perturb(state, arm, 1.0, rng)
+    assert np.all(limb["phase"] == state["phase"])
+    changed = np.flatnonzero(np.any(limb["offset"] != state["offset"], axis=0))
+    np.testing.assert_array_equal(changed, arm - 6)
+    with pytest.raises(ZoopraxisError, match="sigma_offset must be >= 0"):
+        mp.WalkingPrior(body, model, sigma_offset=-0.1)

@@ -173,3 +173,51 @@ def test_walk_with_the_walking_prior(shared_data):
         lost += step.status == "lost"
     assert np.mean(errors) < 0.045 and max(errors) < 0.07
     assert lost == 0
+
+
+# -- partitioned annealing ----------------------------------------------------------------------
+
+
+def test_partitions_cover_every_parameter_once_with_their_limbs():
+    body = make_body("full")
+    groups = particle.partitions(body)
+    cols = np.concatenate([c for c, _ in groups])
+    np.testing.assert_array_equal(np.sort(cols), np.arange(6 + body.n_dofs))
+    names = [[body.segment_names[k] for k in segments] for _, segments in groups]
+    assert len(names[0]) == body.n_segments                  # the root moves everything
+    left_leg = [n for c, n in zip(groups, names) if 6 + body.dof_index("l_knee_flex") in c[0]]
+    assert left_leg == [["l_thigh", "l_shank", "l_foot"]]
+    trunk = [n for c, n in zip(groups, names) if 6 + body.dof_index("lumbar_flex") in c[0]][0]
+    assert "head" in trunk and "r_forearm" in trunk and "l_thigh" not in trunk
+
+
+def test_annealing_layers_climb_the_likelihood_and_track(arm):
+    """Every parameter of the body free (25), few particles: the partitioned layers find
+    poses the image likes better than the plain filter's joint draws do, and track the
+    raising arm with the silhouette cue."""
+    from zoopraxis.core import render
+
+    body, cameras, images, roots, angles = arm
+    shown = body.with_dims({"upper_arm_r": 0.05, "forearm_r": 0.042, "chest_rx": 0.17})
+    frames = range(8, 16)                                    # the elbow bends fast here
+
+    def run(layers):
+        prior = motion_prior.SmoothMotionPrior(body)
+        pf = particle.ParticleFilter(body, cameras[:1], prior, n_particles=200, seed=4,
+                                     layers=layers, silhouette=3.0)
+        pf.start([images[frames[0]][0]], Pose(roots[frames[0]].copy(),
+                                              angles[frames[0]].copy()),
+                 previous=Pose(roots[frames[0] - 1], angles[frames[0] - 1]))
+        errors, best = [], []
+        for k in frames[1:]:
+            mask = render.render(cameras[0], shown.seg2world(roots[k], angles[k]),
+                                 shown.primitives(), want=()).label >= 0
+            step = pf.step([images[k][0]], [mask])
+            errors.append(np.linalg.norm(step.joints - body.joints(roots[k], angles[k]),
+                                         axis=1).mean())
+            best.append(step.log_likelihood.max())
+        return np.mean(errors), np.array(best)
+
+    (plain, plain_best), (annealed, annealed_best) = run(0), run(1)
+    assert annealed < 0.035
+    assert np.mean(annealed_best - plain_best) > 20.0
