@@ -35,7 +35,9 @@ dimensions are the body model's ``LENGTH_DIMS`` (metres). Rotations in the param
 are increments ``exp(w) @ R_start`` on the left (spatial), like ``Pose.retract``.
 """
 
+import copy
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 from scipy import sparse
@@ -91,6 +93,15 @@ LIMB_FLIPS = tuple((f"{s}_{a}", tuple(f"{s}_{j}" for j in rest)) for s in ("l", 
                    for a, *rest in (("shoulder", "elbow", "wrist"), ("elbow", "wrist"),
                                     ("hip", "knee", "ankle", "toe"), ("knee", "ankle", "toe")))
 
+# Limbs whose two parts can each flip in depth: (pivot, middle joint, joints beyond the pivot,
+# joints beyond the middle, DOF name prefixes of the limb).
+_FLIP_LIMBS = tuple(
+    (f"{s}_{a}", f"{s}_{b}", tuple(f"{s}_{j}" for j in (b,) + rest),
+     tuple(f"{s}_{j}" for j in rest), tuple(f"{s}_{d}_" for d in dofs))
+    for s in ("l", "r")
+    for a, b, rest, dofs in (("shoulder", "elbow", ("wrist",), ("shoulder", "elbow")),
+                             ("hip", "knee", ("ankle", "toe"), ("hip", "knee", "ankle"))))
+
 # Parts of the body named in reports, by the joints that move with them.
 BODY_PARTS = {"the trunk": ("neck", "l_shoulder", "r_shoulder", "l_hip", "r_hip"),
               "the head": ("head",),
@@ -125,6 +136,169 @@ _DENSE_LIMIT = 400_000
 # The camera that sees the body's front in the reference configuration (facing -Y, Z up):
 # camera x = body +X (the subject's left on the image right), camera y = -Z, camera z = +Y.
 _FRONT = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+
+
+# ---------------------------------------------------------------------------------------------
+# A pose prior learned from motion capture
+# ---------------------------------------------------------------------------------------------
+
+DEFAULT_POSE_PRIOR = Path(__file__).resolve().parent / "data" / "pose_prior.npz"
+
+# Body parts of the prior, by DOF name prefix: each part's angles have their own density (the
+# capture's few takes cannot say how every arm pose goes with every leg pose).
+PRIOR_PARTS = {"the trunk": ("lumbar_", "thorax_", "neck_"),
+               "the left arm": ("l_shoulder_", "l_elbow_"),
+               "the right arm": ("r_shoulder_", "r_elbow_"),
+               "the left leg": ("l_hip_", "l_knee_", "l_ankle_"),
+               "the right leg": ("r_hip_", "r_knee_", "r_ankle_")}
+# Kernel width per DOF, as a fraction of the data's spread (about Silverman's rule for a few
+# hundred samples in 3-6 dimensions), and at least this many degrees.
+PRIOR_BANDWIDTH = 0.5
+# Combinations of limb signs fitted in full: at most this many, within this many nats of the
+# best before fitting.
+PRIOR_REFITS = 4
+PRIOR_MARGIN = 6.0
+# Weight of the broad everyday-pose Gaussian mixed into the learned density.
+PRIOR_BROAD_WEIGHT = 0.2
+PRIOR_MIN_BANDWIDTH_DEG = 4.0
+
+
+def mirror_angles(dof_names, angles):
+    """Joint angles of the mirror-image pose (the subject's left and right swapped).
+
+    Left and right DOFs exchange their values (the right side's axes are the left's mirrored,
+    so a symmetric pose has equal angles); the trunk's and neck's sideways bend and twist
+    change sign.
+
+    Parameters
+    ----------
+    dof_names : sequence of str
+    angles : array, shape (..., n_dofs)
+    """
+    names = list(dof_names)
+    perm = [names.index({"l_": "r_", "r_": "l_"}.get(n[:2], n[:2]) + n[2:])
+            if n[:2] in ("l_", "r_") else k for k, n in enumerate(names)]
+    out = np.asarray(angles, float)[..., perm].copy()
+    flip = [k for k, n in enumerate(names) if n.endswith(("_bend", "_twist"))
+            and not n.startswith(("l_", "r_"))]
+    out[..., flip] *= -1.0
+    return out
+
+
+class PosePrior:
+    """Kernel density of joint angles learned from motion capture, per body part.
+
+    ``-log p(angles) = sum over parts of -log mean_i N(a_part; a_i,part, h^2)`` (up to a
+    constant), with Gaussian kernels of width ``h`` per DOF, optionally mixed with a broad
+    Gaussian (:meth:`with_broad`). Built by ``tools/learn_pose_prior.py`` from CMU captures.
+
+    Parameters
+    ----------
+    angles : array, shape (N, n_dofs)
+        Sample poses (radians), in the order of ``dof_names``.
+    dof_names : sequence of str
+    template : str
+        The body template the angles belong to.
+    """
+
+    def __init__(self, angles, dof_names, template="full"):
+        self.samples = np.asarray(angles, float)
+        self.dof_names = tuple(str(n) for n in dof_names)
+        self.template = str(template)
+        spread = self.samples.std(axis=0)
+        self.bandwidth = np.maximum(PRIOR_BANDWIDTH * spread,
+                                    np.radians(PRIOR_MIN_BANDWIDTH_DEG))
+        self.parts = {part: np.array([k for k, n in enumerate(self.dof_names)
+                                      if n.startswith(prefixes)])
+                      for part, prefixes in PRIOR_PARTS.items()}
+        self.broad = None
+
+    @classmethod
+    def load(cls, path=None, exclude=()):
+        """Read a prior file (``core/data/pose_prior.npz`` by default).
+
+        Parameters
+        ----------
+        exclude : sequence of str
+            Takes to leave out (to evaluate on them).
+
+        Raises
+        ------
+        ZoopraxisError
+            A missing or malformed file, or nothing left after ``exclude``.
+        """
+        path = Path(path) if path is not None else DEFAULT_POSE_PRIOR
+        try:
+            with np.load(path) as data:
+                angles, takes = data["angles"], data["takes"].astype(str)
+                names, template = data["dof_names"].astype(str), str(data["template"])
+        except (OSError, KeyError, ValueError) as exc:
+            raise ZoopraxisError(f"{path}: not a pose prior file ({exc})") from None
+        keep = ~np.isin(takes, list(exclude))
+        if not keep.any():
+            raise ZoopraxisError(f"{path}: no poses left after leaving out "
+                                 f"{', '.join(exclude)}")
+        return cls(angles[keep], names, template)
+
+    def with_broad(self, mean, sigma, weight=PRIOR_BROAD_WEIGHT):
+        """The same prior mixed with a broad Gaussian of everyday poses (weight ``weight``):
+        poses unlike any in the captures fall back on it instead of on their nearest sample.
+
+        Parameters
+        ----------
+        mean, sigma : array, shape (n_dofs,)
+        weight : float
+        """
+        out = copy.copy(self)
+        out.broad = (np.asarray(mean, float), np.asarray(sigma, float), float(weight))
+        return out
+
+    def part_costs(self, angles):
+        """``-log p`` of each part's angles (nats, up to a constant).
+
+        Parameters
+        ----------
+        angles : array, shape (B, n_dofs)
+
+        Returns
+        -------
+        costs : array, shape (B, n_parts)
+            In the order of ``PRIOR_PARTS``.
+        """
+        a = np.atleast_2d(np.asarray(angles, float))
+        out = np.empty((len(a), len(self.parts)))
+        for i, cols in enumerate(self.parts.values()):
+            z = (a[:, None, cols] - self.samples[None, :, cols]) / self.bandwidth[cols]
+            q = -0.5 * np.einsum("bnk,bnk->bn", z, z)                       # (B, N)
+            top = q.max(axis=1, keepdims=True)
+            log_p = top[:, 0] + np.log(np.mean(np.exp(q - top), axis=1)) \
+                - np.log(self.bandwidth[cols]).sum()
+            if self.broad is not None:
+                mean, sigma, weight = self.broad
+                zb = (a[:, cols] - mean[cols]) / sigma[cols]
+                log_b = -0.5 * np.einsum("bk,bk->b", zb, zb) - np.log(sigma[cols]).sum()
+                log_p = np.logaddexp(np.log1p(-weight) + log_p, np.log(weight) + log_b)
+            out[:, i] = -log_p
+        return out
+
+    def cost(self, angles):
+        """``-log p(angles)`` (nats, up to a constant), shape (B,)."""
+        return self.part_costs(angles).sum(axis=1)
+
+
+_POSE_PRIORS = {}
+
+
+def default_pose_prior(template):
+    """The shipped prior for a template, or None (no file, or learned on another template)."""
+    if template not in _POSE_PRIORS:
+        prior = None
+        if DEFAULT_POSE_PRIOR.is_file():
+            prior = PosePrior.load()
+            if prior.template != template:
+                prior = None
+        _POSE_PRIORS[template] = prior
+    return _POSE_PRIORS[template]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -945,7 +1119,7 @@ def _seen_twice(anchor, views):
 
 
 def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None, fit_dims=True,
-               views=None):
+               views=None, pose_prior="default"):
     """Pose, angles and body dimensions from the clicked joints of anchor frames (§2.6).
 
     Parameters
@@ -967,6 +1141,11 @@ def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None,
         Fit the lengths (shared by all anchors); otherwise keep ``dims``.
     views : list of str, optional
         The views to use; default all views of ``cameras`` (calibrated) or with clicks.
+    pose_prior : PosePrior, "default" or None
+        Chooses the depth sign of each limb in frames clicked in one view (the mirror
+        ambiguity): the shipped prior learned from motion capture (``"default"``, if there is
+        one for the template), a given one, or none (then the angle prior of everyday poses
+        alone decides).
 
     Returns
     -------
@@ -1017,6 +1196,13 @@ def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None,
         sizes = [_image_size(cameras, v, obs[:, i]) for i, v in enumerate(views)]
         fit = _UncalibratedFit(kin, obs, weights, sizes, views, anchors, dims0, fit_dims,
                                warnings)
+    if isinstance(pose_prior, str) and pose_prior == "default":
+        pose_prior = default_pose_prior(template)
+    if pose_prior is not None and tuple(pose_prior.dof_names) != tuple(kin.structure.dof_names):
+        raise ZoopraxisError(f"the pose prior was learned on the '{pose_prior.template}' body, "
+                             f"not on '{template}'")
+    fit.prior = None if pose_prior is None else \
+        pose_prior.with_broad(kin.prior_mean, kin.prior_sigma)
     return fit.run()
 
 
@@ -1049,6 +1235,7 @@ class _Fit:
         self.warnings = warnings
         self.ambiguous = False
         self.swapped = []
+        self.prior = None       # PosePrior: chooses the depth sign of limbs in one view
 
     # Subclasses give start(f) -> _State of one frame (F = 1), options(state, f, fit_dims) ->
     # _Problem options, depth_direction(state, f) and mirrored(state, f) for frames seen in one
@@ -1073,6 +1260,10 @@ class _Fit:
         if mirrored is not None:
             alt, alt_cost, _ = _fit(self.kin, obs, w, mirrored,
                                     **self.options(mirrored, f, fit_dims=self.fit_dims))
+            if self.prior is not None and self.depth_direction(state, f) is not None:
+                # One view: the fit and its whole-body mirror, each limb at either depth
+                # sign, judged by the clicks and the learned prior together.
+                return self._choose_by_prior([state, alt], f)
             if alt_cost < cost:
                 rivals.append((state, cost))
                 state, cost = alt, alt_cost
@@ -1096,6 +1287,129 @@ class _Fit:
                     f"fits about as well (cost {alt_cost:.1f} vs {cost:.1f} px^2); the 3D pose "
                     "is uncertain there: click this frame in another view")
         return state
+
+    def _limb_variants(self, state, f):
+        """Each limb's angles with its upper and lower part at either depth sign (§2.6's
+        ambiguity of one view), posed by inverse kinematics on the reflected joints.
+
+        Returns
+        -------
+        variants : list (limbs) of list of (angles of the limb's DOFs, flips)
+            The first variant of each limb is the state's own.
+        dofs : list (limbs) of array of int
+        """
+        kin = self.kin
+        normal = self.depth_direction(state, f)
+        names = kin.structure.dof_names
+        Y = kin.forward(state.angles, state.dims)[0][0]
+        X = Y @ state.roots[0, :3, :3].T + state.roots[0, :3, 3]
+        variants, dofs = [], []
+        for pivot, middle, upper, lower, prefixes in _FLIP_LIMBS:
+            moved = np.array([k for k, n in enumerate(names) if n.startswith(prefixes)])
+            own = [(state.angles[0, moved].copy(), ())]
+            for flips in (("upper",), ("lower",), ("upper", "lower")):
+                target = X.copy()
+                shifted = 0.0
+                for part, (centre, rows) in zip(("upper", "lower"),
+                                                ((pivot, upper), (middle, lower))):
+                    if part not in flips:
+                        continue
+                    rows = [JOINT_INDEX[j] for j in rows]
+                    p = target[JOINT_INDEX[centre]]
+                    n = normal(p)
+                    shift = 2.0 * ((target[rows] - p) @ n)[:, None] * n
+                    target[rows] -= shift
+                    shifted = max(shifted, np.abs(shift).max())
+                if shifted < _MIN_FLIP_M:
+                    continue    # that part lies in the image plane: its mirror is itself
+                angles = state.angles[0].copy()
+                angles[moved] = kin.prior_mean[moved]
+                _, angles, _ = _fit_3d(kin, target, state.dims, state.roots[0], angles,
+                                       free_root=False, dofs=moved)
+                own.append((angles[moved], flips))
+            variants.append(own)
+            dofs.append(moved)
+        return variants, dofs
+
+    def _click_costs(self, state, f, angles):
+        """Robust click cost (px^2) of a frame's state with each row of ``angles`` (B, n)."""
+        kin = self.kin
+        Y = kin.forward(angles, state.dims)[0]                                # (B, 17, 3)
+        X = Y @ state.roots[0, :3, :3].T + state.roots[0, :3, 3]
+        costs = np.zeros(len(angles))
+        for v, cam in enumerate(self._frame_cameras(state)):
+            uv = self.obs[f, v]
+            seen = np.isfinite(uv).all(axis=-1) & (self.weights[f, v] > 0)
+            if cam is None or not seen.any():
+                continue
+            err = np.linalg.norm(cam.project(X[:, seen]) - uv[seen], axis=-1)  # (B, m)
+            c = LOSS_SCALE_PX
+            costs += np.sum(c**2 * (np.sqrt(1.0 + err**2 / c**2) - 1.0), axis=1)
+        return costs
+
+    def _score(self, state, f, angles):
+        """Negative log posterior (nats, up to a constant) of a frame's state with each row of
+        ``angles``: the clicks under CLICK_SIGMA_PX noise and the learned pose prior."""
+        return self._click_costs(state, f, angles) / CLICK_SIGMA_PX**2 + self.prior.cost(angles)
+
+    def _choose_by_prior(self, starts, f):
+        """Choose the depth sign of every limb by the clicks and the learned pose prior.
+
+        Every combination of the limbs' variants (:meth:`_limb_variants`) of every start (the
+        fit and its whole-body mirror) is scored without refitting (reflected limbs project
+        alike), the best is fitted, and the best combination that differs in some body part
+        is fitted and scored too: if it is within one nat, the prior cannot decide between
+        them and a warning names the parts.
+        """
+        obs, w = self.obs[f:f + 1], self.weights[f:f + 1]
+        pool = []
+        for k, state in enumerate(starts):
+            variants, dofs = self._limb_variants(state, f)
+            grids = np.meshgrid(*[np.arange(len(v)) for v in variants], indexing="ij")
+            picks = np.stack([g.ravel() for g in grids], axis=1)            # (B, limbs)
+            angles = np.repeat(state.angles, len(picks), axis=0)
+            for i, (own, moved) in enumerate(zip(variants, dofs)):
+                table = np.array([a for a, _ in own])
+                angles[:, moved] = table[picks[:, i]]
+            scores = self._score(state, f, angles)
+            pool += [(float(sc), k, a) for sc, a in zip(scores, angles)]
+        pool.sort(key=lambda t: t[0])
+
+        def fitted(entry):
+            _, k, angles = entry
+            trial = starts[k].copy()
+            trial.angles[0] = angles
+            trial, _, _ = _fit(self.kin, obs, w, trial,
+                               **self.options(trial, f, fit_dims=self.fit_dims))
+            return trial, float(self._score(trial, f, trial.angles)[0])
+
+        # The few best combinations that differ from each other are fitted and scored
+        # again: a reflected limb posed by inverse kinematics can miss its clicks a little.
+        chosen = []
+        for entry in pool:
+            if entry[0] > pool[0][0] + PRIOR_MARGIN or len(chosen) == PRIOR_REFITS:
+                break
+            trial = starts[entry[1]].copy()
+            trial.angles[0] = entry[2]
+            if all(self._moved_parts(other, trial) for other, _ in chosen):
+                chosen.append((trial, entry))
+        results = sorted((fitted(entry) for _, entry in chosen), key=lambda t: t[1])
+        best, best_score = results[0]
+        for alt, alt_score in results[1:]:
+            moved = self._moved_parts(best, alt)
+            if moved and alt_score < best_score + 1.0:
+                self.ambiguous = True
+                self.warnings.append(
+                    f"frame {self.frames[f]}: a pose with {_join(moved)} mirrored in depth "
+                    f"fits about as well (clicks and pose prior: {alt_score:.1f} vs "
+                    f"{best_score:.1f} nats); the 3D pose is uncertain there: click this frame "
+                    "in another view")
+                break
+        return best
+
+    def _frame_cameras(self, state):
+        """The cameras of a one-frame state, per view (None where none)."""
+        return list(state.cameras[0])
 
     def _explore_limbs(self, state, cost, f):
         """Try each limb (and each lower limb) turned to its depth mirror image, §2.6's
@@ -1506,6 +1820,11 @@ class _UncalibratedFit(_Fit):
 
     def start(self, f):
         """Best single-view fit over body turns, then each other view's camera alone."""
+        return self._starts(f, 2)[0]
+
+    def _starts(self, f, keep):
+        """Single-view fits from the ``keep`` best body turns, best first, each with the other
+        views' cameras placed."""
         kin = self.kin
         obs, w = self.obs[f:f + 1], self.weights[f:f + 1]
         views = list(np.flatnonzero(self.usable[f]))
@@ -1530,17 +1849,19 @@ class _UncalibratedFit(_Fit):
                                fit_dims=False, free_cams=free, calibrated=False,
                                max_nfev=30)[:2])
         trials.sort(key=lambda t: t[1])
-        best = None
-        for state, _ in trials[:2]:
+        fits = []
+        for state, _ in trials[:keep]:
             fitted, cost, _ = _fit(kin, obs, only, state, free_root=False, fit_dims=False,
                                    free_cams=free, calibrated=False, max_nfev=100)
-            if best is None or cost < best[1]:
-                best = (fitted, cost)
-        state = best[0]
-        Y = kin.forward(state.angles, state.dims)[0][0]
-        for v in views[1:]:
-            state.cameras[0][v] = self._place_camera(state, f, v, Y)
-        return state
+            fits.append((cost, len(fits), fitted))
+        fits.sort(key=lambda t: t[:2])
+        out = []
+        for _, _, state in fits:
+            Y = kin.forward(state.angles, state.dims)[0][0]
+            for v in views[1:]:
+                state.cameras[0][v] = self._place_camera(state, f, v, Y)
+            out.append(state)
+        return out
 
     def _place_camera(self, state, f, v, Y):
         """Camera of view ``v`` alone for a known body: the affine camera of the clicks, made
@@ -1714,6 +2035,6 @@ def refine_dims(body, poses_by_frame, observations, cameras, *, weights=None, fi
     return RefineResult(new_body, poses, out_cams, rms)
 
 
-__all__ = ["initialize", "InitResult", "init_from_json", "refine_dims", "RefineResult",
+__all__ = ["initialize", "InitResult", "PosePrior", "default_pose_prior", "mirror_angles", "init_from_json", "refine_dims", "RefineResult",
            "triangulate", "similarity_from_points", "procrustes_mpjpe", "LR_PAIRS",
            "LOSS_SCALE_PX", "DIMS_RANGE"]

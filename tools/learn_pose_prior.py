@@ -1,0 +1,66 @@
+"""Learn the pose prior of single-view initialization from CMU motion capture.
+
+    .venv/bin/python tools/learn_pose_prior.py [--data ../shared/data/cmu_mocap] \
+        [--takes 131_01 131_02 131_03 01_01] [--step 4] [--out core/data/pose_prior.npz] [--force]
+
+This is how ``core/data/pose_prior.npz`` is built; run it again to rebuild it. Steps:
+
+1. read each capture at 30 fps and take its 17 standard joints (``core.bvh``);
+2. fit the ``full`` body to every ``step``-th frame (``fit3d.fit_sequence``: the lengths
+   measured on the joints, then each frame's root and angles);
+3. keep the joint angles of every frame and their mirror image (left and right swapped), each
+   labelled with its take, so that a benchmark can leave a take out
+   (``initialize.PosePrior.load(..., exclude=...)``).
+
+The prior is a kernel density over these angle vectors, per body part
+(``initialize.PosePrior``); initialization uses it to choose the depth sign of limbs that one
+uncalibrated view cannot see (Bregler & Malik §2.6).
+"""
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from zoopraxis.core import bvh, fit3d
+from zoopraxis.core.initialize import DEFAULT_POSE_PRIOR, mirror_angles
+
+REPO = Path(__file__).resolve().parents[1]
+FPS = 30.0
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data" / "cmu_mocap")
+    parser.add_argument("--takes", nargs="+", default=["131_01", "131_02", "131_03", "01_01"])
+    parser.add_argument("--step", type=int, default=4, help="use every STEP-th frame at 30 fps")
+    parser.add_argument("--out", type=Path, default=DEFAULT_POSE_PRIOR)
+    parser.add_argument("--force", action="store_true", help="replace an existing output")
+    args = parser.parse_args(argv)
+    if args.out.exists() and not args.force:
+        sys.exit(f"learn_pose_prior: {args.out} exists (use --force to replace it)")
+
+    angles, takes, names = [], [], None
+    for name in args.takes:
+        path = args.data / f"{name}.bvh"
+        if not path.is_file():
+            sys.exit(f"learn_pose_prior: {path}: no such capture")
+        joints = bvh.standard_joints(bvh.load_cmu(path, fps=FPS))[::args.step]
+        body, poses, rms = fit3d.fit_sequence(joints, "full")
+        names = body.dof_names
+        a = np.array([p.angles for p in poses])
+        a = np.concatenate([a, mirror_angles(names, a)])
+        angles.append(a)
+        takes += [name] * len(a)
+        print(f"{name}: {len(poses)} frames fitted, median joint RMS "
+              f"{1000 * np.median(rms):.1f} mm", flush=True)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    np.savez_compressed(args.out, angles=np.concatenate(angles).astype(np.float32),
+                        takes=np.array(takes), dof_names=np.array(names),
+                        template=np.array("full"))
+    print(f"{sum(len(a) for a in angles)} poses (with mirrors) -> {args.out}")
+
+
+if __name__ == "__main__":
+    main()
