@@ -2,7 +2,8 @@
 
 Prints one table: initial-pose error against the generating body's joints (body-model poses)
 or the capture's joints (CMU poses), segment lengths, bad-click detection, dimension
-refinement over a sequence, fine-tuning after tracking, and board calibration on synthetic images. Targets (issue #3):
+refinement over a sequence, fine-tuning after tracking, and board calibration on synthetic
+images. Targets (issue #3):
 MPJPE <= 25 mm with 3 calibrated views, Procrustes-aligned MPJPE <= 40 mm with 1 uncalibrated
 view, segment lengths within 5 %, board calibration within 0.3 px.
 

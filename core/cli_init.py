@@ -23,6 +23,9 @@ def build_parser():
                    help="body template: full, muybridge, sidenbladh or yamamoto (full)")
     p.add_argument("--fixed-dims", action="store_true",
                    help="keep the template's body dimensions instead of fitting them")
+    p.add_argument("--no-pose-prior", action="store_true",
+                   help="in frames clicked in one view, choose the limbs' depth without the "
+                        "pose prior learned from motion capture")
     p.add_argument("--out", required=True, help="init.json to write")
     p.add_argument("--force", action="store_true", help="overwrite --out")
     return p
@@ -63,7 +66,7 @@ def main(argv):
           flush=True)
     result = initialize(anchors, cameras, template=args.template,
                         calibrated=bool(args.calibration), fit_dims=not args.fixed_dims,
-                        views=views)
+                        views=views, pose_prior=None if args.no_pose_prior else "default")
     print("body dimensions (m): " + ", ".join(f"{name} {result.body.dims[name]:.3f}"
                                              for name in LENGTH_DIMS))
     print("rms per view (px): " + ", ".join(f"{view} {rms:.2f}"

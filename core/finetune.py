@@ -7,8 +7,8 @@ person's silhouette against the background, in every sampled frame and view, and
 joints on the animator's clicks at the anchor frames. Both are image evidence; the tracker's
 own projected joints are not used (they would only confirm the body they came from).
 
-One joint problem over the sampled frames: the lengths (``body.LENGTH_DIMS``) are shared, each
-frame has its own pose (root twist and angles). Residuals:
+One joint problem over the sampled frames (those the first track marked ok): the limbs' lengths
+(``REFINED_DIMS``) are shared, each frame has its own pose (root twist and angles). Residuals:
 
 - silhouette: the observed signed distance (``background.signed_distance``, positive outside)
   at every contour pixel of the rendered model, robust, each frame and view weighted alike;
@@ -39,7 +39,7 @@ from .background import BackgroundModel, estimate_background, signed_distance
 from .body import LENGTH_DIMS, Pose
 from .errors import ZoopraxisError
 from .image_motion import image_with_gradients, sample
-from .joints import JOINT_INDEX, STANDARD_JOINTS
+from .joints import JOINT_INDEX
 from .render import render
 
 # Robust scales (working pixels) and weights. Each sampled frame and view counts as this many
@@ -157,7 +157,7 @@ class _Problem:
             T, seg_J = body.kinematics(pose)
             Xj, Jj = body.joints_jacobian(pose)                          # (17, 3), (17, 3, P)
             Jd = body.joints_dims_jacobian(pose, self.names)              # (17, 3, D)
-            rows = []                                                      # (r, w, dr/dpose, dr/ddims)
+            rows = []          # (residuals, weights, d r / d pose, d r / d dims) per view
             for c, cam in enumerate(self.cameras):
                 if self.sdf[k][c] is None:
                     continue
@@ -281,8 +281,8 @@ def fit_body_to_images(body, poses, cameras, masks, clicks=None, *, iterations=1
         H_dd, g_d = H_dd + H_p, g_d + g_p
         accepted = False
         while lam < 1e6:
-            A = H_ff + lam * (np.diagonal(H_ff, axis1=1, axis2=2)[:, :, None] * np.eye(H_ff.shape[1])
-                              + 1e-6 * np.eye(H_ff.shape[1]))
+            eye = np.eye(H_ff.shape[1])
+            A = H_ff + lam * (np.diagonal(H_ff, axis1=1, axis2=2)[:, :, None] * eye + 1e-6 * eye)
             Ainv_W = np.linalg.solve(A, H_fd)                                # (K, P, D)
             Ainv_b = np.linalg.solve(A, g_f[..., None])[..., 0]              # (K, P)
             S = H_dd + lam * np.diag(np.diag(H_dd)) \

@@ -23,12 +23,16 @@ the other views) by ``scipy.optimize.least_squares`` with analytic Jacobians, a 
 the clicks, bounds for the joint limits and the dimensions, and priors of everyday angles and
 of the template's proportions (what the clicks cannot see, e.g. the split of a bend between the
 two spine joints, takes its likely value). In a frame clicked in one view, every limb is also
-tried mirrored in depth. Clicks that look swapped left for right and outlying clicks are named
-in warnings and not absorbed; a mirrored pose that fits about as well is reported.
+tried mirrored in depth, and the depth signs of the limbs' parts are chosen by the clicks
+together with a pose prior learned from motion capture (:class:`PosePrior`, a kernel density
+of joint angles per limb, ``core/data/pose_prior.npz`` from ``tools/learn_pose_prior.py``).
+Clicks that look swapped left for right and outlying clicks are named in warnings and not
+absorbed; a mirrored pose that fits (and is as likely) about as well is reported.
 
-:func:`refine_dims` is the building block of model fine-tuning (§2.7): the same joint problem
-over many tracked frames, where the tracker's projected joints are the observations; it is
-solved by blocks (Schur complement on the shared dimensions, as in bundle adjustment).
+:func:`refine_dims` is the joint-based form of model fine-tuning (§2.7): the same joint
+problem over many frames with 2D joint observations; it is solved by blocks (Schur complement
+on the shared dimensions, as in bundle adjustment). Fine-tuning on the images of a tracked take
+(silhouettes and clicks) is ``finetune.py``.
 
 Convention: world Z up, metres; OpenCV cameras and pixels (``X_c = R @ X_w + t``). Body
 dimensions are the body model's ``LENGTH_DIMS`` (metres). Rotations in the parameter vectors
@@ -2035,6 +2039,7 @@ def refine_dims(body, poses_by_frame, observations, cameras, *, weights=None, fi
     return RefineResult(new_body, poses, out_cams, rms)
 
 
-__all__ = ["initialize", "InitResult", "PosePrior", "default_pose_prior", "mirror_angles", "init_from_json", "refine_dims", "RefineResult",
+__all__ = ["initialize", "InitResult", "PosePrior", "default_pose_prior", "mirror_angles",
+           "init_from_json", "refine_dims", "RefineResult",
            "triangulate", "similarity_from_points", "procrustes_mpjpe", "LR_PAIRS",
            "LOSS_SCALE_PX", "DIMS_RANGE"]

@@ -504,3 +504,22 @@ def test_init_command_writes_init_json(tmp_path, capsys):
         [0, 47]
     assert cli.main(args) == 2                                # no overwrite without --force
     assert "already exists" in capsys.readouterr().err
+
+
+def test_init_command_one_view_with_and_without_the_pose_prior(tmp_path, capsys):
+    root = cli.__file__.replace("cli.py", "samples/walk3/")
+    marks = json.loads(open(root + "markers.json").read())
+    marks["anchors"] = [{"frame": a["frame"], "views": {"cam0": a["views"]["cam0"]}}
+                        for a in marks["anchors"][:1]]
+    markers = tmp_path / "markers.json"
+    markers.write_text(json.dumps(marks))
+    joints = {}
+    for flag in ([], ["--no-pose-prior"]):
+        out = tmp_path / f"init{len(flag)}.json"
+        args = ["init", "--markers", str(markers), f"--plate=cam0={root}cam0",
+                "--out", str(out), *flag]
+        assert cli.main(args) == 0, capsys.readouterr().err
+        data = json.loads(out.read_text())
+        assert data["mode"] == "uncalibrated"
+        joints[len(flag)] = np.array(data["anchors"][0]["joints3d"])
+    assert joints[0].shape == joints[1].shape == (17, 3)
