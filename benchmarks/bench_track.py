@@ -7,8 +7,10 @@ tracker starts from the animator's clicks (markers with 2 px noise at the anchor
 by the initialization) unless ``--init truth`` is given.
 
 Prints one row per case: MPJPE and Procrustes-aligned MPJPE (mm) against the capture's joints,
-knee and elbow flexion RMSE (degrees, measured on the joints), lost and uncertain frames, frames
-per second of tracking, peak memory and the largest limb overlap (mm, sphere proxies).
+knee and elbow flexion RMSE (degrees, measured on the joints), lost and uncertain frames by the
+tracker's status, frames more than 150 mm off by the truth (">150mm") and how many of those the
+status called ok ("of.ok"), frames where the silhouette limb search moved a limb ("recov"),
+frames per second of tracking, peak memory and the largest limb overlap (mm, sphere proxies).
 
     .venv/bin/python benchmarks/bench_track.py            # all cases (several minutes)
     .venv/bin/python benchmarks/bench_track.py --quick    # 60 frames per case
@@ -48,6 +50,10 @@ CASES = {
     "walk1-uncal": ("131_02.bvh", 150, 120, 1, False, 2.0, 8, "average", 30.0, 0),
     "brisk3": ("131_03.bvh", 60, 120, 3, True, 2.0, 8, "average", 30.0, 0),
 }
+
+
+# A frame more than this far off (mean over the joints) is lost, whatever its status says.
+OFF_MM = 150.0
 
 
 def procrustes_mpjpe(pred, true):
@@ -119,10 +125,17 @@ def run_case(name, spec, *, quick, init_mode, anchor_every):
                             - flexion(true, f"{s}_shoulder", f"{s}_elbow", f"{s}_wrist")
                             for s in "lr"])
     tracked = len(res.frames) - len(anchor_frames)
+    per_frame = 1000 * np.linalg.norm(pred - true, axis=2).mean(axis=1) if calibrated \
+        else procrustes_mpjpe(pred, true)
     return {"case": name, "views": views, "anchors": len(anchor_frames), "mode": "cal" if calibrated else "uncal",
             "frames": len(res.frames), "mpjpe": mpjpe, "pa": pa,
             "knee": float(np.sqrt(np.mean(knee ** 2))), "elbow": float(np.sqrt(np.mean(elbow ** 2))),
             "lost": res.status.count("lost"), "uncertain": res.status.count("uncertain"),
+            # frames whose error says lost, whatever the status says; and how many of them
+            # the status passed off as ok
+            "off": int((per_frame > OFF_MM).sum()),
+            "off_ok": int(sum(1 for e, s in zip(per_frame, res.status) if e > OFF_MM and s == "ok")),
+            "recovered": sum(1 for r in res.extra.get("recovered_limbs", []) if r),
             "fps": tracked / elapsed,
             "overlap": float(np.max(res.extra["limb_overlap_mm"])),
             "mem": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
@@ -140,7 +153,8 @@ def main(argv=None):
     if not (DATA / "cmu_mocap").is_dir():
         sys.exit(f"no motion capture at {DATA / 'cmu_mocap'} (set ZOOPRAXIS_SHARED_DATA)")
     header = (f"{'case':<14}{'views':>5} {'mode':>5}{'anch':>5}{'frames':>7}{'MPJPE':>8}{'PA-MPJPE':>9}"
-              f"{'knee°':>7}{'elbow°':>7}{'lost':>5}{'uncert':>7}{'fps':>6}{'MB':>7}{'overlap':>8}")
+              f"{'knee°':>7}{'elbow°':>7}{'lost':>5}{'uncert':>7}{'>150mm':>7}{'of.ok':>6}"
+              f"{'recov':>6}{'fps':>6}{'MB':>7}{'overlap':>8}")
     print(header)
     print("-" * len(header))
     for name in args.cases.split(","):
@@ -148,7 +162,8 @@ def main(argv=None):
                      anchor_every=args.anchor_every)
         print(f"{r['case']:<14}{r['views']:>5} {r['mode']:>5}{r['anchors']:>5}{r['frames']:>7}{r['mpjpe']:>8.1f}"
               f"{r['pa']:>9.1f}{r['knee']:>7.1f}{r['elbow']:>7.1f}{r['lost']:>5}"
-              f"{r['uncertain']:>7}{r['fps']:>6.1f}{r['mem']:>7.0f}{r['overlap']:>8.1f}",
+              f"{r['uncertain']:>7}{r['off']:>7}{r['off_ok']:>6}{r['recovered']:>6}"
+              f"{r['fps']:>6.1f}{r['mem']:>7.0f}{r['overlap']:>8.1f}",
               flush=True)
 
 

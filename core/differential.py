@@ -31,6 +31,7 @@ from .body import Pose
 from .collision import body_proxies, penalty_system
 from .image_motion import (Accumulated, Term, accumulate, assemble, image_with_gradients,
                            sample)
+from .recover import LimbSearch, unexplained_foreground
 from .render import render
 
 
@@ -55,6 +56,24 @@ class Settings:
     prior_weight: float = 0.01        # pull towards the prediction, relative to the data
     damping: float = 1e-3             # initial Levenberg-Marquardt damping
     collision_weight: float = 3e4     # limb overlap penalty, per square metre
+    threads: int = 2                  # views solved in parallel (numpy releases the GIL)
+    limb_search: bool = True          # silhouette search for limbs left behind (recover.py;
+                                      # calibrated, two views or more)
+    tolerance: float = 1e-5           # stop a level's iterations when no parameter moves more
+                                      # (metres or radians)
+
+
+_POOL = None
+
+
+def _pool():
+    """A small thread pool shared by all trackers (the machines we run on have 2+ cores)."""
+    global _POOL
+    if _POOL is None:
+        from concurrent.futures import ThreadPoolExecutor
+
+        _POOL = ThreadPoolExecutor(max_workers=2, thread_name_prefix="zoopraxis-view")
+    return _POOL
 
 
 @dataclass
@@ -128,6 +147,9 @@ class StepReport:
     iterations: int
     renders: list = field(default_factory=list)   # per view RenderResult at the new pose
     coverage: np.ndarray = None   # (V,) fraction of the model's silhouette inside the foreground
+    recovered: list = field(default_factory=list)   # limbs moved by the silhouette search
+    limb_fit: dict = None         # limb name -> silhouette score in [-1, 1] (recover.py)
+    unexplained: np.ndarray = None  # (V,) thick foreground blobs the model misses / model area
 
 
 class DifferentialTracker:
@@ -149,6 +171,7 @@ class DifferentialTracker:
         self.prims = body.primitives()
         self.proxies = body_proxies(body)
         self.anchor_terms = None
+        self.search = LimbSearch(body)
 
     # -- parameter layout ---------------------------------------------------------------------
 
@@ -257,9 +280,8 @@ class DifferentialTracker:
         The contour is rendered at the current estimate and at the level's resolution, so the
         points are the occluding contour of the pose being refined, not of the previous frame.
         """
-        terms = []
-        for c, cam in enumerate(state.cameras):
-            cam_l = self._camera_at(cam, level)
+        def one(c):
+            cam_l = self._camera_at(state.cameras[c], level)
             T = self.body.seg2world(state.pose(c))
             rr = render(cam_l, T, self.prims, want=("point",))
             fgm = rr.label >= 0
@@ -271,11 +293,12 @@ class DifferentialTracker:
             seg = rr.label[vv, uu].astype(np.int64)
             X = rr.point[vv, uu].astype(np.float64)
             ref = se3.apply(se3.invert(T)[seg], X)
-            terms.append(Term(c, seg, ref, np.zeros(len(seg)), np.ones(len(seg)),
-                              self.settings.silhouette_scale / 2 ** level, "silhouette",
-                              hinge=None if self.settings.silhouette_margin < 0
-                              else self.settings.silhouette_margin / 2 ** level))
-        return terms
+            return Term(c, seg, ref, np.zeros(len(seg)), np.ones(len(seg)),
+                        self.settings.silhouette_scale / 2 ** level, "silhouette",
+                        hinge=None if self.settings.silhouette_margin < 0
+                        else self.settings.silhouette_margin / 2 ** level)
+
+        return self.map_views(one, len(state.cameras))
 
     def set_anchor(self, state, images, renders):
         """Keep the appearance of an anchor frame as a persistent template (per view).
@@ -291,8 +314,17 @@ class DifferentialTracker:
     # -- rendering -------------------------------------------------------------------------------
 
     def render_views(self, state, want=("point",)):
-        return [render(cam, self.body.seg2world(state.pose(c)), self.prims, want=want)
-                for c, cam in enumerate(state.cameras)]
+        def one(c):
+            return render(state.cameras[c], self.body.seg2world(state.pose(c)), self.prims,
+                          want=want)
+
+        return self.map_views(one, len(state.cameras))
+
+    def map_views(self, fn, n):
+        """``[fn(c) for c in range(n)]``, over views in parallel when ``settings.threads``."""
+        if n > 1 and self.settings.threads > 1:
+            return list(_pool().map(fn, range(n)))
+        return [fn(c) for c in range(n)]
 
     # -- one frame ---------------------------------------------------------------------------------
 
@@ -322,12 +354,15 @@ class DifferentialTracker:
         g = np.zeros(P)
         cost = 0.0
         accs = {}
-        for c, terms in enumerate(terms_by_view):
+        kin = self.body.kinematics(state.pose(0)) if self.calibrated else None
+
+        def view_system(c):
+            # calibrated views share one world pose: one forward kinematics for all
+            seg2world, seg_jac = kin if self.calibrated else self.body.kinematics(state.pose(c))
             cam = self._camera_at(state.cameras[c], level)
-            pose = state.pose(c)
-            seg2world, seg_jac = self.body.kinematics(pose)
             A = b = None
-            for key, term, weight in terms:
+            cost_c, accs_c = 0.0, {}
+            for key, term, weight in terms_by_view[c]:
                 if term is None or len(term) == 0 or weight == 0:
                     continue
                 stack = images[c].stacks[level] if term.name != "silhouette" \
@@ -337,19 +372,25 @@ class DifferentialTracker:
                                  extra_weight=em_weights.get((c, key)))
                 A = weight * acc.A if A is None else A + weight * acc.A
                 b = weight * acc.b if b is None else b + weight * acc.b
-                cost += weight * acc.cost
-                accs[(c, key)] = acc
+                cost_c += weight * acc.cost
+                accs_c[(c, key)] = acc
             if A is None:
-                continue
+                return None, None, cost_c, accs_c
             total = Accumulated(A, b, 0.0, 0.0, None, None)
             Hc, gc = assemble(total, seg_jac,
                               root_cols=roots_cols[c], angle_cols=angle_cols, n_params=P,
                               scale_col=scale_cols[c])
-            H += Hc
-            g += gc
+            return Hc, gc, cost_c, accs_c
+
+        for Hc, gc, cost_c, accs_c in self.map_views(view_system, len(terms_by_view)):
+            cost += cost_c
+            accs.update(accs_c)
+            if Hc is not None:
+                H += Hc
+                g += gc
         if self.settings.collision_weight > 0 and len(self.proxies.pairs):
             # Limbs must not pass through each other (penalty on sphere-proxy overlaps).
-            seg2world, seg_jac = self.body.kinematics(state.pose(0))
+            seg2world, seg_jac = kin if self.calibrated else self.body.kinematics(state.pose(0))
             r, J = penalty_system(self.proxies, seg2world, seg_jac)
             if len(r):
                 w = self.settings.collision_weight
@@ -359,7 +400,7 @@ class DifferentialTracker:
                 cost += w * float(r @ r)
         return H, g, cost, accs
 
-    def step(self, state_t, images_t, images_t1, previous=None, renders_t=None):
+    def step(self, state_t, images_t, images_t1, previous=None, renders_t=None, start=None):
         """Track one frame: the pose at t+1 from the pose at t.
 
         Parameters
@@ -370,19 +411,53 @@ class DifferentialTracker:
             Pose at t-1, for the constant-velocity prediction.
         renders_t : list of RenderResult, optional
             Renders of ``state_t`` (from the previous step), to save rendering them again.
+        start : State, optional
+            Where the iterations start and what the weak prior pulls towards, instead of the
+            constant-velocity prediction (a coarse search's proposal).
 
         Returns
         -------
         state : State
         report : StepReport
         """
-        s = self.settings
-        V = len(state_t.cameras)
         if renders_t is None:
             renders_t = self.render_views(state_t)
         flow = self.template_terms(state_t, images_t, renders_t)
+        state, report = self._step(state_t, images_t, images_t1, previous, renders_t, start, flow)
+        if self.search is None:
+            return state, report
+        sdfs = [None if im.sdf is None else im.sdf[0][..., 0] for im in images_t1]
+        if all(d is None for d in sdfs):
+            return state, report
+        labels = [r.label for r in report.renders]
+        # One view's silhouette leaves a limb's depth free (and scaled-orthographic views
+        # fit perspective plates only roughly): the search needs two calibrated views.
+        if (self.settings.limb_search and self.calibrated
+                and sum(d is not None for d in sdfs) >= 2):
+            angles, moved = self.search.search(state, sdfs, labels)
+            if moved:
+                proposal = state.copy()
+                proposal.angles = angles
+                state2, report2 = self._step(state_t, images_t, images_t1, previous, renders_t,
+                                             proposal, flow)
+                if np.nanmean(report2.iou) >= np.nanmean(report.iou) - 0.005:
+                    report2.recovered = [name for name, _ in moved]
+                    state, report = state2, report2
+                    labels = [r.label for r in report.renders]
+        report.limb_fit = self.search.fit(state, sdfs, labels)
+        report.unexplained = np.array([
+            np.nan if d is None else
+            unexplained_foreground(d < 0, lab).sum() / max(int((lab >= 0).sum()), 1)
+            for d, lab in zip(sdfs, labels)])
+        return state, report
+
+    def _step(self, state_t, images_t, images_t1, previous, renders_t, start, flow=None):
+        s = self.settings
+        V = len(state_t.cameras)
+        if flow is None:
+            flow = self.template_terms(state_t, images_t, renders_t)
         use_sil = images_t1[0].sdf is not None and s.silhouette_weight > 0
-        state = self.predict(state_t, previous)
+        state = self.predict(state_t, previous) if start is None else start.copy()
         prior_center = state.copy()
         total_iters = 0
         cost = 0.0
@@ -435,7 +510,7 @@ class DifferentialTracker:
                     if s.em and it == 0:
                         em = self._em_weights(terms_by_view, images_t1, accs, level)
                         H, g, cost, accs = self._system(state, level, terms_by_view, images_t1, em)
-                    if np.abs(delta).max() < 1e-5:
+                    if np.abs(delta).max() < s.tolerance:
                         break
                 else:
                     lam *= 10

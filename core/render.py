@@ -22,6 +22,7 @@ world -> camera ``X_c = R @ X_w + t``; "depth" is the camera z of a surface poin
 """
 
 from collections import OrderedDict
+import threading
 from dataclasses import dataclass
 import weakref
 
@@ -398,6 +399,7 @@ class _Rays:
 # arrays: converting 640x480 rays costs a few milliseconds, as much as rendering.
 _GRID_CACHE = OrderedDict()
 _GRID_CACHE_SIZE = 16
+_GRID_LOCK = threading.Lock()      # views may be rendered from several threads
 
 
 def _check_camera(camera):
@@ -415,24 +417,31 @@ def _camera_grid(camera):
     t = np.asarray(camera.t, dtype=float)
     origins, dirs = camera.pixel_rays()
     key = (id(dirs), id(origins))
-    entry = _GRID_CACHE.get(key)
-    if entry is not None:
-        dirs_ref, origins_ref, R0, t0, size0, rays = entry
-        if dirs_ref() is dirs and origins_ref() is origins and (W, H) == size0 \
-                and np.array_equal(R0, R) and np.array_equal(t0, t):
-            _GRID_CACHE.move_to_end(key)
-            return rays, (W, H)
+    with _GRID_LOCK:
+        entry = _GRID_CACHE.get(key)
+        if entry is not None:
+            dirs_ref, origins_ref, R0, t0, size0, rays = entry
+            if dirs_ref() is dirs and origins_ref() is origins and (W, H) == size0 \
+                    and np.array_equal(R0, R) and np.array_equal(t0, t):
+                _GRID_CACHE.move_to_end(key)
+                return rays, (W, H)
     rays = _prepare_grid(origins, dirs, R, t, W, H)
     try:
         refs = (weakref.ref(dirs), weakref.ref(origins))
         # The entry goes when the camera's rays go, so ids are never reused stale.
-        weakref.finalize(dirs, _GRID_CACHE.pop, key, None)
+        weakref.finalize(dirs, _forget_grid, key)
     except TypeError:  # not weak-referenceable: recompute next time
         return rays, (W, H)
-    _GRID_CACHE[key] = refs + (R.copy(), t.copy(), (W, H), rays)
-    while len(_GRID_CACHE) > _GRID_CACHE_SIZE:
-        _GRID_CACHE.popitem(last=False)
+    with _GRID_LOCK:
+        _GRID_CACHE[key] = refs + (R.copy(), t.copy(), (W, H), rays)
+        while len(_GRID_CACHE) > _GRID_CACHE_SIZE:
+            _GRID_CACHE.popitem(last=False)
     return rays, (W, H)
+
+
+def _forget_grid(key):
+    with _GRID_LOCK:
+        _GRID_CACHE.pop(key, None)
 
 
 def _prepare_grid(origins, dirs, R, t, W, H):

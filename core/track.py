@@ -211,10 +211,12 @@ def _blend_report(fwd, bwd, w, measured):
     from .differential import StepReport
 
     fit, iou = measured
-    return StepReport(residual=(1 - w) * fwd.residual + w * bwd.residual,
-                      iou=iou, cost=(1 - w) * fwd.cost
-                      + w * bwd.cost, iterations=fwd.iterations + bwd.iterations,
-                      renders=None, coverage=fit)
+    out = StepReport(residual=(1 - w) * fwd.residual + w * bwd.residual,
+                     iou=iou, cost=(1 - w) * fwd.cost
+                     + w * bwd.cost, iterations=fwd.iterations + bwd.iterations,
+                     renders=None, coverage=fit)
+    out.recovered = sorted(set(fwd.recovered or []) | set(bwd.recovered or []))
+    return out
 
 
 def anchor_frames_all(anchors):
@@ -321,12 +323,14 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
                                                              inside, state_at, log)
 
     def images(frame):
-        out = []
-        for c, img in enumerate(source.colour(frame)):
-            fg = backgrounds[c].foreground(img) if use_bg[c] else None
-            out.append(prepare_images(to_gray_float(img), settings.levels,
-                                      settings.smooth_sigma, fg))
-        return out
+        colours = source.colour(frame)
+
+        def one(c):
+            fg = backgrounds[c].foreground(colours[c]) if use_bg[c] else None
+            return prepare_images(to_gray_float(colours[c]), settings.levels,
+                                  settings.smooth_sigma, fg)
+
+        return tracker.map_views(one, len(colours))
 
     # Plan: passes between anchors
     anchor_frames = [a.frame for a in inside]
@@ -409,6 +413,8 @@ def _make_result(body, views, plates, factors, states, reports, calibrated, init
     angles = np.zeros((F, body.n_dofs))
     iou = np.full((F, len(views)), np.nan)
     fit = np.full((F, len(views)), np.nan)
+    limb_fit, recovered = [], []
+    unexplained = np.full((F, len(views)), np.nan)
     ref = None
     if not calibrated:
         # Body-centred frame: the body as camera 0 saw it at the first anchor, made Z-up.
@@ -428,11 +434,17 @@ def _make_result(body, views, plates, factors, states, reports, calibrated, init
             full = cam.scaled(1.0 / factors[v], sampling="resize") if factors[v] != 1.0 else cam
             joints2d[v][i] = full.project(body.joints(st.pose(c)))
             rep = reports.get(f)
+            if c == 0:
+                limb_fit.append({k: round(x, 3) for k, x in
+                                 (getattr(rep, "limb_fit", None) or {}).items()})
+                recovered.append(list(getattr(rep, "recovered", None) or []))
             if rep is not None:
                 residual[v][i] = rep.residual[c]
                 iou[i, c] = rep.iou[c]
                 if rep.coverage is not None:
                     fit[i, c] = rep.coverage[c]
+                if getattr(rep, "unexplained", None) is not None:
+                    unexplained[i, c] = rep.unexplained[c]
     from .collision import body_proxies, penetration
 
     proxies = body_proxies(body)
@@ -455,6 +467,8 @@ def _make_result(body, views, plates, factors, states, reports, calibrated, init
              "silhouette_fit": np.round(np.nan_to_num(fit, nan=-1.0), 4).tolist(),
              "cancelled": cancelled,
              "limb_overlap_mm": np.round(1000 * overlap, 2).tolist(),
+             "limb_fit": limb_fit, "recovered_limbs": recovered,
+             "unexplained": np.round(np.nan_to_num(unexplained, nan=-1.0), 4).tolist(),
              "warnings": list(init.warnings)}
     return TrackResult(mode="calibrated" if calibrated else "uncalibrated", fps=float(fps),
                        frames=np.array(order), joints3d=joints3d, joints2d=joints2d,

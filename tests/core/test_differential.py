@@ -71,6 +71,23 @@ def test_step_recovers_a_known_motion(body, n_views):
     assert np.all(report.iou > 0.95) and np.all(report.residual < 5.0)
 
 
+def test_views_in_parallel_give_the_same_step(body):
+    p0, p1 = two_poses(body)
+    cams = ring_of_cameras(3, 3.5, 1.3, [0, 0, 0.9], SIZE, 350)
+    frames = model_plates(body, [p0, p1], cams, noise=1.0)
+    out = []
+    for threads in (1, 2):
+        settings = D.Settings(threads=threads)
+        tracker = D.DifferentialTracker(body, True, settings)
+        state = D.State(np.stack([p0.root] * 3), p0.angles.copy(), cams)
+        new, report = tracker.step(state, prepared(frames[0], settings, True),
+                                   prepared(frames[1], settings, True))
+        out.append((new, report))
+    (a, ra), (b, rb) = out
+    assert np.array_equal(a.angles, b.angles) and np.array_equal(a.roots, b.roots)
+    assert np.array_equal(ra.residual, rb.residual) and ra.cost == rb.cost
+
+
 def test_step_respects_joint_limits(body):
     p0, _ = two_poses(body)
     p1 = p0.copy()

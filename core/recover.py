@@ -1,0 +1,300 @@
+"""Limb recovery: a silhouette search for a limb the image-motion step left behind.
+
+Gauss-Newton on image motion only follows what moves a few pixels at the coarsest level. A
+kick or a fast arm swing moves a shin further than that, and once the model's leg is left
+behind the frame-to-frame motion cannot bring it back: the appearance under it is now the
+background or the other leg. Bregler & Malik call for a coarse search in front of the
+differential step; this is the cheapest one that works from the plates themselves.
+
+For each limb (each leg, each arm) in turn, with the rest of the body held, poses of the limb's
+joints are drawn around the current ones and scored on the foreground silhouettes of all views:
+points sampled inside the limb's primitives should project inside the foreground (by the signed
+distance), and into foreground that the rest of the body does not already explain. Drawing is
+done in two rounds (wide, then narrow around the best). Everything is vectorized over draws and
+points; the whole search costs a few milliseconds a frame. When a limb's best draw clearly beats
+its current pose, the tracker refines from it (:meth:`DifferentialTracker.step` with ``start``).
+"""
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from .render import CYLINDER
+
+# Standard deviations of the first round of draws, radians, by joint.
+WIDTHS = {"hip": 0.5, "knee": 0.7, "ankle": 0.3, "shoulder": 0.6, "elbow": 0.7}
+POINTS_PER_PRIMITIVE = 48
+SHRINK = 0.6            # points lie this far out towards the surface (robust to other builds)
+SDF_SCALE = 3.0         # pixels of signed distance for a full +-1 score
+SHARED_CREDIT = 0.4     # credit for foreground that the rest of the body already covers
+UNEXPLAINED_BONUS = 0.6  # extra credit for foreground that no part of the model covers
+UNEXPLAINED_MIN_PX = 5  # unexplained foreground thinner than this is the build, not a limb
+
+
+@dataclass
+class LimbGroup:
+    """One limb: its joint angles and the segments they move."""
+
+    name: str
+    dofs: np.ndarray        # indices into the angles
+    widths: np.ndarray      # first-round standard deviations, radians
+    segments: np.ndarray    # segment indices of the limb
+    stages: list = None     # (dofs, segments) searched in turn, proximal first
+
+
+def limb_groups(body):
+    """Each leg and each arm of ``body`` as a :class:`LimbGroup` (templates without a limb
+    simply have fewer groups)."""
+    groups = []
+    for side in "lr":
+        for limb, joints, segs in (("leg", ("hip", "knee", "ankle"), ("thigh", "shank", "foot")),
+                                   ("arm", ("shoulder", "elbow"), ("upper_arm", "forearm"))):
+            dofs, widths, stages = [], [], []
+            for j, sname in zip(joints, segs):
+                stage = [i for i, name in enumerate(body.dof_names)
+                         if name.startswith(f"{side}_{j}")]
+                seg = [k for k, n in enumerate(body.segment_names) if n == f"{side}_{sname}"]
+                dofs += stage
+                widths += [WIDTHS[j]] * len(stage)
+                if stage and seg:
+                    stages.append((np.array(stage), np.array(seg)))
+            seg = [k for k, n in enumerate(body.segment_names)
+                   if any(n == f"{side}_{s}" for s in segs)]
+            if dofs and seg:
+                # proximal joint first (the thigh alone), then the rest of the limb
+                staged = stages[:1] + ([(np.concatenate([d for d, _ in stages[1:]]),
+                                         np.concatenate([k for _, k in stages[1:]]))]
+                                       if len(stages) > 1 else [])
+                groups.append(LimbGroup(f"{'left' if side == 'l' else 'right'} {limb}",
+                                        np.array(dofs), np.array(widths), np.array(seg),
+                                        staged))
+    return groups
+
+
+def interior_points(prims, n=POINTS_PER_PRIMITIVE, shrink=SHRINK, seed=0):
+    """Points inside each primitive, in its segment's coordinates.
+
+    Returns
+    -------
+    segment : array of int, shape (M,)
+    points : array, shape (M, 3)
+    """
+    rng = np.random.default_rng(seed)
+    segs, pts = [], []
+    for p in range(len(prims)):
+        size = prims.size[p]
+        if prims.kind[p] == CYLINDER:
+            z = rng.uniform(0.05, 0.95, n) * size[2]
+            r = 1 + (prims.taper[p] - 1) * z / size[2]
+            a = rng.uniform(0, 2 * np.pi, n)
+            rad = shrink * np.sqrt(rng.uniform(0.2, 1.0, n))
+            local = np.column_stack([size[0] * r * rad * np.cos(a),
+                                     size[1] * r * rad * np.sin(a), z])
+        else:
+            d = rng.normal(size=(n, 3))
+            d /= np.linalg.norm(d, axis=1, keepdims=True)
+            local = shrink * np.sqrt(rng.uniform(0.2, 1.0, n))[:, None] * d * size
+        T = prims.prim2seg[p]
+        pts.append(local @ T[:3, :3].T + T[:3, 3])
+        segs.append(np.full(n, prims.segment[p]))
+    return np.concatenate(segs), np.concatenate(pts)
+
+
+def unexplained_foreground(foreground, labels, min_px=UNEXPLAINED_MIN_PX):
+    """Foreground that the model's support map does not cover, in blobs at least ``min_px``
+    thick (a thin rim is a body of another build than the model's, not a missing limb)."""
+    model = cv2.dilate((labels >= 0).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+    rest = (foreground & ~model).astype(np.uint8)
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (min_px, min_px))
+    return cv2.morphologyEx(rest, cv2.MORPH_OPEN, kernel) > 0
+
+
+class LimbSearch:
+    """Silhouette search over each limb's joint angles (see the module notes).
+
+    Parameters
+    ----------
+    body : BodyModel
+    draws : int
+        Draws per round and limb (the current pose is always one of them).
+    margin : float
+        How much better (in the score's units, -1..1 per point) a limb's best draw must be
+        than its current pose to be proposed.
+    poor : float
+        Limbs scoring below this are searched (a limb inside the silhouettes is left to the
+        image-motion step, which is more precise).
+    attract : tuple of str
+        Limbs ("leg", "arm") that are also searched, and drawn, towards foreground no part of
+        the model explains. Legs only by default: arms hang beside a torso that the model's
+        may not fill out (another build), and would be drawn into the gap.
+    seed : int
+    """
+
+    def __init__(self, body, draws=160, margin=0.08, poor=0.3, seed=0, attract=("leg",)):
+        self.body = body
+        self.poor = poor
+        self.attract = attract
+        self.draws = draws
+        self.margin = margin
+        self.rng = np.random.default_rng(seed)
+        self.groups = limb_groups(body)
+        self.point_segment, self.points = interior_points(body.primitives())
+
+    def score(self, roots, angles, segments, cameras, sdfs, rest, unexplained=None):
+        """Silhouette score of a batch of poses for one limb, mean over points and views.
+
+        Parameters
+        ----------
+        roots : array, shape (V, 4, 4)
+            The root of each view (the same world root when calibrated).
+        angles : array, shape (N, n_dofs)
+        segments : array of int
+            The segments whose points are scored.
+        cameras : list of camera
+        sdfs : list of array (H, W) or None
+            Signed distance to the foreground (negative inside) per view; None skips a view.
+        rest : list of array of bool (H, W) or None
+            Pixels the rest of the body covers.
+        unexplained : list of array of bool (H, W) or None, optional
+            Foreground that no part of the model covers (thick blobs only): where a limb
+            left behind has gone.
+
+        Returns
+        -------
+        score : array, shape (N,)
+        """
+        sel = np.isin(self.point_segment, segments)
+        seg = self.point_segment[sel]
+        pts = self.points[sel]
+        total = np.zeros(len(angles))
+        used = 0
+        T = None
+        for c, cam in enumerate(cameras):
+            if sdfs[c] is None:
+                continue
+            if T is None or not np.array_equal(roots[c], roots[c - 1]):
+                T = self.body.seg2world(np.repeat(roots[c][None], len(angles), axis=0), angles)
+            Ts = T[:, seg]
+            X = np.einsum("nmij,mj->nmi", Ts[..., :3, :3], pts) + Ts[..., :3, 3]
+            uv = cam.project(X.reshape(-1, 3)).reshape(len(angles), -1, 2)
+            h, w = sdfs[c].shape
+            u = np.clip(np.rint(uv[..., 0]), 0, w - 1).astype(np.intp)
+            v = np.clip(np.rint(uv[..., 1]), 0, h - 1).astype(np.intp)
+            off = (uv[..., 0] < 0) | (uv[..., 0] > w - 1) | (uv[..., 1] < 0) | (uv[..., 1] > h - 1)
+            s = np.clip(-sdfs[c][v, u] / SDF_SCALE, -1.0, 1.0)
+            s = np.where(off, -1.0, s)
+            if rest is not None and rest[c] is not None:
+                s = np.where((s > 0) & rest[c][v, u], SHARED_CREDIT * s, s)
+            if unexplained is not None and unexplained[c] is not None:
+                s = s + UNEXPLAINED_BONUS * (unexplained[c][v, u] & ~off)
+            total += s.mean(axis=1)
+            used += 1
+        return total / max(used, 1)
+
+    def search(self, state, sdfs, rest_labels):
+        """Best pose of each limb in turn; returns the new angles and the limbs that moved.
+
+        Parameters
+        ----------
+        state : differential.State
+        sdfs : list of array (H, W) or None
+            Per view at the cameras' resolution.
+        rest_labels : list of array of int (H, W) or None
+            The model's support map at ``state`` per view (segment labels, -1 background).
+
+        Returns
+        -------
+        angles : array, shape (n_dofs,)
+        moved : list of (str, float)
+            Limbs whose draw won, with the score gained.
+        """
+        angles = state.angles.copy()
+        moved = []
+        self.last_scores = {}
+        unexplained = [None if d is None or lab is None else unexplained_foreground(d < 0, lab)
+                       for d, lab in zip(sdfs, rest_labels)]
+        for group in self.groups:
+            rest = [None if lab is None else (lab >= 0) & ~np.isin(lab, group.segments)
+                    for lab in rest_labels]
+            best, gain = self._search_group(state.roots, angles, group, state.cameras, sdfs,
+                                            rest, unexplained)
+            if gain > self.margin:
+                angles = best
+                moved.append((group.name, float(gain)))
+                # what this limb now covers is explained: other limbs must not go there too
+                unexplained = self._clear(unexplained, state.roots, angles, group,
+                                          state.cameras)
+        return angles, moved
+
+    def _clear(self, unexplained, roots, angles, group, cameras, radius=4):
+        sel = np.isin(self.point_segment, group.segments)
+        out = []
+        for c, cam in enumerate(cameras):
+            u_mask = unexplained[c]
+            if u_mask is None:
+                out.append(None)
+                continue
+            T = self.body.seg2world(roots[c], angles)[self.point_segment[sel]]
+            X = np.einsum("mij,mj->mi", T[:, :3, :3], self.points[sel]) + T[:, :3, 3]
+            uv = np.rint(cam.project(X)).astype(np.intp)
+            h, w = u_mask.shape
+            ok = (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
+            hit = np.zeros((h, w), np.uint8)
+            hit[uv[ok, 1], uv[ok, 0]] = 1
+            k = 2 * radius + 1
+            hit = cv2.dilate(hit, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k)))
+            out.append(u_mask & (hit == 0))
+        return out
+
+    def fit(self, state, sdfs, labels):
+        """Silhouette score of every limb at ``state`` (see :meth:`search` for the inputs).
+
+        Returns
+        -------
+        dict of str to float
+            Limb name -> mean score in [-1, 1]: near 1 when the limb lies inside the
+            foreground of every view, below 0 when it lies mostly outside.
+        """
+        out = {}
+        for group in self.groups:
+            rest = [None if lab is None else (lab >= 0) & ~np.isin(lab, group.segments)
+                    for lab in labels]
+            out[group.name] = float(self.score(state.roots, state.angles[None], group.segments,
+                                               state.cameras, sdfs, rest)[0])
+        return out
+
+    def _search_group(self, roots, angles, group, cameras, sdfs, rest, unexplained):
+        if not group.name.endswith(self.attract):
+            unexplained = [None] * len(unexplained)
+        current = self.score(roots, angles[None], group.segments, cameras, sdfs, rest,
+                             unexplained)[0]
+        self.last_scores[group.name] = current
+        if current >= self.poor and not any(u is not None and u.any() for u in unexplained):
+            return angles, 0.0
+        centre = angles
+        lower, upper = self.body.lower, self.body.upper
+        # Each stage: half the draws uniform over the joints' range, half around the current
+        # pose; then a narrower round around the stage's best.
+        for dofs, segs in group.stages:
+            best = self.score(roots, centre[None], segs, cameras, sdfs, rest, unexplained)[0]
+            width = np.array([group.widths[list(group.dofs).index(d)] for d in dofs])
+            for spread in (1.0, 0.3):
+                trial = np.repeat(centre[None], self.draws, axis=0)
+                noise = self.rng.normal(size=(self.draws - 1, len(dofs))) * width * spread
+                trial[1:, dofs] += noise
+                if spread == 1.0:
+                    half = self.draws // 2
+                    trial[half:, dofs] = self.rng.uniform(lower[dofs], upper[dofs],
+                                                          size=(self.draws - half, len(dofs)))
+                trial = self.body.clamp(trial)
+                s = self.score(roots, trial, segs, cameras, sdfs, rest, unexplained)
+                k = int(np.argmax(s))
+                if s[k] > best:
+                    centre, best = trial[k], s[k]
+        final = self.score(roots, centre[None], group.segments, cameras, sdfs, rest,
+                           unexplained)[0]
+        return centre, final - current
+
+
+__all__ = ["LimbSearch", "LimbGroup", "limb_groups", "interior_points"]

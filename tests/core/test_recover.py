@@ -1,0 +1,129 @@
+"""Limb recovery: the silhouette search finds a limb the image-motion step cannot reach."""
+
+import numpy as np
+import pytest
+
+from zoopraxis.core import differential as D
+from zoopraxis.core import se3
+from zoopraxis.core.background import signed_distance
+from zoopraxis.core.body import make_body
+from zoopraxis.core.camera import ring_of_cameras
+from zoopraxis.core.recover import LimbSearch, interior_points, limb_groups
+from zoopraxis.core.render import render
+
+from tests.core.test_differential import model_plates, prepared
+
+SIZE = (320, 240)
+
+
+@pytest.fixture(scope="module")
+def body():
+    return make_body("full")
+
+
+@pytest.fixture(scope="module")
+def cams():
+    return ring_of_cameras(3, 3.5, 1.3, [0, 0, 0.9], SIZE, 350)
+
+
+def kicked(body):
+    """A standing pose and the same pose with the left leg kicked forward, knee bent."""
+    p0 = body.rest_pose(se3.transform(p=[0, 0, 0.95]))
+    p1 = p0.copy()
+    p1.angles[body.dof_index("l_hip_flex")] = 1.1
+    p1.angles[body.dof_index("l_knee_flex")] = 0.9
+    p1.angles = body.clamp(p1.angles)
+    return p0, p1
+
+
+def silhouettes(body, pose, cams):
+    out = []
+    for cam in cams:
+        rr = render(cam, body.seg2world(pose), body.primitives(), want=())
+        out.append(rr.label)
+    return out
+
+
+def test_limb_groups_cover_the_limbs(body):
+    groups = {g.name: g for g in limb_groups(body)}
+    assert set(groups) == {"left leg", "right leg", "left arm", "right arm"}
+    leg = groups["left leg"]
+    assert {body.dof_names[i] for i in leg.dofs} == {
+        "l_hip_flex", "l_hip_abd", "l_hip_rot", "l_knee_flex", "l_ankle_flex", "l_ankle_inv"}
+    assert {body.segment_names[k] for k in leg.segments} == {"l_thigh", "l_shank", "l_foot"}
+    arm = groups["right arm"]
+    assert {body.segment_names[k] for k in arm.segments} == {"r_upper_arm", "r_forearm"}
+    # the muybridge template has no feet: its legs still form groups
+    m = make_body("muybridge")
+    assert len(limb_groups(m)) == 4
+
+
+def test_interior_points_lie_inside_their_primitives(body):
+    prims = body.primitives()
+    seg, pts = interior_points(prims, n=20)
+    assert len(seg) == 20 * len(prims)
+    # Every point projects inside the model's own support map, on its own segment's label
+    # or one in front of it.
+    pose = body.rest_pose(se3.transform(p=[0, 0, 0.95]))
+    cam = ring_of_cameras(1, 3.5, 1.0, [0, 0, 0.9], SIZE, 350)[0]
+    T = body.seg2world(pose)
+    X = np.einsum("mij,mj->mi", T[seg, :3, :3], pts) + T[seg, :3, 3]
+    uv = np.rint(cam.project(X)).astype(int)
+    label = render(cam, T, prims, want=()).label
+    assert (label[uv[:, 1], uv[:, 0]] >= 0).mean() > 0.99
+
+
+def test_search_finds_a_kicked_leg(body, cams):
+    p0, p1 = kicked(body)
+    labels1 = silhouettes(body, p1, cams)
+    sdfs = [signed_distance(lab >= 0) for lab in labels1]
+    state = D.State(np.stack([p0.root] * 3), p0.angles.copy(), list(cams))
+    search = LimbSearch(body, seed=3)
+    angles, moved = search.search(state, sdfs, silhouettes(body, p0, cams))
+    assert [name for name, _ in moved] == ["left leg"]
+    knee_true = body.joints(p1)[[body_joint(body, "l_knee"), body_joint(body, "l_ankle")]]
+    knee_found = body.joints(D.Pose(p0.root, angles))[[body_joint(body, "l_knee"),
+                                                     body_joint(body, "l_ankle")]]
+    knee_start = body.joints(p0)[[body_joint(body, "l_knee"), body_joint(body, "l_ankle")]]
+    err = np.linalg.norm(knee_found - knee_true, axis=1).max()
+    assert np.linalg.norm(knee_start - knee_true, axis=1).max() > 0.3
+    assert err < 0.08
+    # The other limbs are left alone.
+    others = [i for i in range(body.n_dofs) if not body.dof_names[i].startswith("l_")]
+    assert np.allclose(angles[others], p0.angles[others])
+
+
+def test_search_leaves_a_fitting_body_alone(body, cams):
+    p0, _ = kicked(body)
+    labels = silhouettes(body, p0, cams)
+    state = D.State(np.stack([p0.root] * 3), p0.angles.copy(), list(cams))
+    angles, moved = LimbSearch(body).search(state, [signed_distance(lab >= 0) for lab in labels],
+                                            labels)
+    assert moved == []
+    assert np.array_equal(angles, p0.angles)
+
+
+def body_joint(body, name):
+    from zoopraxis.core.joints import JOINT_INDEX
+
+    return JOINT_INDEX[name]
+
+
+@pytest.mark.parametrize("search", [False, True])
+def test_step_recovers_a_kick_only_with_the_search(body, cams, search):
+    p0, p1 = kicked(body)
+    settings = D.Settings(limb_search=search)
+    frames = model_plates(body, [p0, p1], cams)
+    ims0 = prepared(frames[0], settings, True)
+    ims1 = prepared(frames[1], settings, True)
+    tracker = D.DifferentialTracker(body, True, settings)
+    state0 = D.State(np.stack([p0.root] * 3), p0.angles.copy(), list(cams))
+    state1, report = tracker.step(state0, ims0, ims1)
+    err = 1000 * np.linalg.norm(body.joints(state1.pose()) - body.joints(p1), axis=1).max()
+    if search:
+        assert report.recovered == ["left leg"]
+        assert err < 40
+    else:
+        # the kick is beyond the image-motion step's reach: this is what the search is for
+        assert report.recovered == []
+        assert err > 150
