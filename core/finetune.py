@@ -52,10 +52,16 @@ MAX_CONTOUR_POINTS = 800
 DIMS_PRIOR_SIGMA = 0.10
 # Clicks count like this many contour points each (they say where the joint centres are).
 CLICK_WEIGHT = 10.0
-# The lengths refined: the limbs'. The trunk's and the head's outlines are their radii more
-# than their lengths (and clothes, hair), and its lengths and widths are what the anchors'
-# clicks see best; the limbs are what one anchor sees foreshortened.
-REFINED_DIMS = ("thigh", "shank", "foot_length", "upper_arm", "forearm")
+# The lengths refined: the legs' and the forearms'. The trunk's and the head's outlines are
+# their radii more than their lengths (and clothes, hair), and its lengths and widths are what
+# the anchors' clicks see best. An upper arm mostly lies along the trunk, where its outline
+# merges with the trunk's: its length from silhouettes was unstable in tests (off by 10-20 %
+# in both directions), so it stays as the clicks set it. A foot is a few pixels long.
+REFINED_DIMS = ("thigh", "shank", "forearm")
+# Spread of a pose's change from the tracked one: root translation (m), root rotation (rad),
+# joint angles (rad).
+POSE_PRIOR_SIGMA = (0.05, 0.1, 0.15)
+POSE_PRIOR_WEIGHT = 10.0        # cost of one spread, squared pixels
 # Lengths stay within these multiples of their start.
 DIMS_STEP_RANGE = (0.7, 1.4)
 
@@ -118,10 +124,11 @@ def _robust(r, scale):
 class _Problem:
     """The contour and click residuals of a body over the sampled frames."""
 
-    def __init__(self, body, cameras, sdf, clicks, dims0):
+    def __init__(self, body, cameras, sdf, clicks, dims0, valid):
         self.template_body = body
         self.cameras = cameras          # V working cameras
         self.sdf = sdf                  # K lists of V stacks (H, W, 3) or None
+        self.valid = valid              # K lists of V bool images or None (all valid)
         self.clicks = clicks            # K arrays (V, 17, 2), NaN where not clicked
         self.dims0 = dims0
         self.ends = _segment_ends(body)
@@ -174,6 +181,11 @@ class _Problem:
                 X = rr.point[vv, uu].astype(np.float64)
                 uv, A = cam.project_jacobian(X)
                 vals, inside = sample(self.sdf[k][c], uv)
+                if self.valid[k][c] is not None:
+                    # Where the background was never seen the silhouette says nothing.
+                    px = np.clip(np.rint(uv).astype(int), 0,
+                                 np.array(self.valid[k][c].shape[::-1]) - 1)
+                    inside &= self.valid[k][c][px[:, 1], px[:, 0]]
                 if not inside.any():
                     continue
                 seg, X, A, vals = seg[inside], X[inside], A[inside], vals[inside].astype(float)
@@ -220,14 +232,15 @@ class _Problem:
         return cost, rms, blocks
 
     def prior(self, dims):
-        """Prior cost, gradient and Hessian of the lengths (relative to their start)."""
+        """Prior cost of the lengths (relative to their start) and its Gauss-Newton terms (the
+        halved gradient's negative and Hessian, like the data's)."""
         w = 1.0 / (DIMS_PRIOR_SIGMA * self.dims0) ** 2
         e = dims - self.dims0
-        return float(np.sum(w * e ** 2)), -2.0 * w * e, 2.0 * np.diag(w)
+        return float(np.sum(w * e ** 2)), -w * e, np.diag(w)
 
 
-def fit_body_to_images(body, poses, cameras, masks, clicks=None, *, iterations=10, cancel=None,
-                       log=None):
+def fit_body_to_images(body, poses, cameras, masks, clicks=None, *, valid=None, iterations=10,
+                       cancel=None, log=None):
     """Refine a body's lengths and the poses of some frames on silhouettes and clicks (§2.7).
 
     Parameters
@@ -242,6 +255,8 @@ def fit_body_to_images(body, poses, cameras, masks, clicks=None, *, iterations=1
         Foreground mask per frame and view (None: the view gives no silhouette there).
     clicks : list of array, shape (V, 17, 2), optional
         Clicked joints per frame in the cameras' pixels, NaN where not clicked.
+    valid : list of list of array of bool, shape (H, W), or None, optional
+        Where each mask can be trusted (the background was seen there); default everywhere.
     iterations : int
         Levenberg-Marquardt steps at most.
     cancel : callable() -> bool, optional
@@ -261,12 +276,25 @@ def fit_body_to_images(body, poses, cameras, masks, clicks=None, *, iterations=1
     sdf = [[None if m is None else image_with_gradients(signed_distance(np.asarray(m, bool)))
             for m in row] for row in masks]
     dims0 = body.dims_vector(REFINED_DIMS)
-    problem = _Problem(body, cameras, sdf, clicks, dims0)
+    if valid is None:
+        valid = [[None] * V for _ in range(K)]
+    problem = _Problem(body, cameras, sdf, clicks, dims0, valid)
     lo, hi = DIMS_STEP_RANGE[0] * dims0, DIMS_STEP_RANGE[1] * dims0
     dims = dims0.copy()
     poses = [p.copy() for p in poses]
+    # The poses stay near the track's: a frame without clicks whose silhouette is poor must
+    # not wander off (each pose parameter's change from the track, in spreads).
+    n = body.n_dofs
+    w_pose = POSE_PRIOR_WEIGHT / np.concatenate([np.full(3, POSE_PRIOR_SIGMA[0]) ** 2,
+                                               np.full(3, POSE_PRIOR_SIGMA[1]) ** 2,
+                                               np.full(n, POSE_PRIOR_SIGMA[2]) ** 2])
+    moved = np.zeros((len(poses), 6 + n))        # change from the track (sum of the steps)
+
+    def pose_prior(moved):
+        return float(np.sum(w_pose * moved ** 2))
+
     cost, rms0, blocks = problem.linearize(dims, poses)
-    cost += problem.prior(dims)[0]
+    cost += problem.prior(dims)[0] + pose_prior(moved)
     cost0, rms = cost, rms0
     lam = 1e-3
     done = 0
@@ -279,6 +307,8 @@ def fit_body_to_images(body, poses, cameras, masks, clicks=None, *, iterations=1
         H_ff, H_fd, g_f, H_dd, g_d = blocks
         _, g_p, H_p = problem.prior(dims)
         H_dd, g_d = H_dd + H_p, g_d + g_p
+        H_ff = H_ff + w_pose[:, None] * np.eye(6 + n)
+        g_f = g_f - w_pose * moved
         accepted = False
         while lam < 1e6:
             eye = np.eye(H_ff.shape[1])
@@ -293,7 +323,7 @@ def fit_body_to_images(body, poses, cameras, masks, clicks=None, *, iterations=1
             new_poses = [Pose(p.retract(d).root, body.clamp(p.retract(d).angles))
                          for p, d in zip(poses, d_pose)]
             new_cost, new_rms, new_blocks = problem.linearize(new_dims, new_poses)
-            new_cost += problem.prior(new_dims)[0]
+            new_cost += problem.prior(new_dims)[0] + pose_prior(moved + d_pose)
             if new_cost < cost:
                 accepted = True
                 break
@@ -302,6 +332,7 @@ def fit_body_to_images(body, poses, cameras, masks, clicks=None, *, iterations=1
             break
         gain = cost - new_cost
         dims, poses, cost, rms, blocks = new_dims, new_poses, new_cost, new_rms, new_blocks
+        moved = moved + d_pose
         lam = max(lam / 3.0, 1e-7)
         log(f"fine-tune step {done}: cost {cost:.1f}, contour RMS {rms:.2f} px")
         if gain < 1e-4 * cost:
@@ -331,6 +362,8 @@ class FinetuneResult:
     measures : dict of str to dict
         ``{"before": ..., "after": ...}`` from :func:`track_measures`.
     fit : BodyFit or None
+    samples : list of int
+        The frames the lengths were fitted on (``fit.poses`` are theirs).
     cancelled : bool
     log : list of str
     """
@@ -343,6 +376,7 @@ class FinetuneResult:
     kept: bool
     measures: dict
     fit: object = None
+    samples: list = field(default_factory=list)
     cancelled: bool = False
     log: list = field(default_factory=list)
 
@@ -496,9 +530,12 @@ def finetune(plates, anchors, cameras, *, result=None, init=None, frames=None, o
     body0 = init.body
     before = track_measures(first)
 
+    picked = []
+
     def finish(kept_result, retrack, body_after, kept, after=None, fit=None, cancelled=False):
         return FinetuneResult(kept_result, first, retrack, body0, body_after, kept,
-                              {"before": before, "after": after}, fit, cancelled, lines)
+                              {"before": before, "after": after}, fit, list(picked), cancelled,
+                              lines)
 
     if first.extra.get("cancelled"):
         say("fine-tune: cancelled during the first track; keeping it")
@@ -513,11 +550,15 @@ def finetune(plates, anchors, cameras, *, result=None, init=None, frames=None, o
     source = T.FrameSource(plates, views, offsets, factors)
     index = {int(f): i for i, f in enumerate(first.frames)}
     pose_of = {f: Pose(first.roots[i], first.angles[i]) for f, i in index.items()}
-    picked = _sample_frames(first, samples)
+    picked[:] = _sample_frames(first, samples)
     say(f"fine-tune: fitting the lengths on {len(picked)} frames x {len(views)} views")
     models = _backgrounds(backgrounds, views, source, body0, work, pose_of, factors)
     masks = [[None if models[c] is None else models[c].foreground(img)
               for c, img in enumerate(source.colour(f))] for f in picked]
+    seen = [None if m is None or m.known is None else
+            ~cv2.dilate((~m.known).astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
+            for m in models]
+    valid = [list(seen) for _ in picked]
     by_frame = {a.frame: a for a in inside}
     clicks = []
     for f in picked:
@@ -533,7 +574,8 @@ def finetune(plates, anchors, cameras, *, result=None, init=None, frames=None, o
         return cancel is not None and cancel()
 
     fit = fit_body_to_images(body0, [pose_of[f] for f in picked], work, masks, clicks,
-                             iterations=iterations, cancel=fit_progress_cancel, log=say)
+                             valid=valid, iterations=iterations, cancel=fit_progress_cancel,
+                             log=say)
     body1 = fit.body
     say("fine-tune: lengths " + ", ".join(
         f"{n} {1000 * body0.dims[n]:.0f}->{1000 * body1.dims[n]:.0f} mm"
@@ -542,9 +584,20 @@ def finetune(plates, anchors, cameras, *, result=None, init=None, frames=None, o
     if fit.cancelled:
         say("fine-tune: cancelled; keeping the first track")
         return finish(first, None, body1, False, fit=fit, cancelled=True)
+    # The anchors' poses for the new body: the fit's, or the clicks fitted again with the
+    # lengths held, whichever lies nearer the clicks.
+    again = initialize(inside, {v: cameras[v] for v in views}, template=body1.template,
+                       calibrated=True, dims=body1.dims, fit_dims=False, views=views)
     refined = dict(zip(picked, fit.poses))
-    start = T.Initial(body1, {a.frame: refined[a.frame] for a in inside}, dict(cameras), None,
-                      [])
+
+    def click_rms(pose, anchor):
+        X = body1.joints(pose)
+        err = [np.linalg.norm(cameras[v].project(X) - anchor.array(v), axis=1) for v in views]
+        return float(np.sqrt(np.nanmean(np.concatenate(err) ** 2)))
+
+    start = T.Initial(body1, {a.frame: min((refined[a.frame], again.poses[a.frame]),
+                                           key=lambda p, a=a: click_rms(p, a))
+                              for a in inside}, dict(cameras), None, [])
     stage["base"] = stage["steps"] + iterations
     second = track_once(start)
     if second.extra.get("cancelled"):
