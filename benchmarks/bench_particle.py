@@ -262,6 +262,9 @@ def main(argv=None):
     for n in (100, 1000, 10000):
         error, spread, lost, seconds = run_walk(take, n, args.seed, model, frames=6)
         rows.append(("time, 1 view, 5 frames", n, error, spread, lost, seconds))
+    error, spread, lost, seconds = run_walk(take, 10000, args.seed, model, frames=6,
+                                            silhouette=SILHOUETTE)
+    rows.append(("time, silhouette, 5 frames", 10000, error, spread, lost, seconds))
     error, spread, lost, seconds = run_walk(take, 2000, args.seed, model, frames=6, layers=1)
     rows.append(("time, 1 layer, 5 frames", 2000, error, spread, lost, seconds))
     print()

@@ -79,6 +79,10 @@ _MAX_MAP = 32767
 _MIN_COS = 0.1
 
 _BASIS = 6
+
+# The silhouette cue draws its foreground pixels from the mask eroded by this element, and
+# checks the limbs' points against the mask dilated by it.
+_ERODE = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (7, 7))
 _ATTACHED = -1
 
 
@@ -396,13 +400,18 @@ class ImageLikelihood:
                 raise ZoopraxisError(f"view '{cam.name}': foreground mask is {mask.shape[1]}x"
                                      f"{mask.shape[0]}, the camera expects "
                                      f"{cam.width}x{cam.height}")
-            rows, cols = np.nonzero(mask)
+            # Pixels drawn a few pixels inside the outline: the model's limbs are not the
+            # person's, and a slightly wider person should not draw limbs sideways.
+            inner = cv2.erode(mask.astype(np.uint8), _ERODE) > 0
+            rows, cols = np.nonzero(inner if inner.any() else mask)
             if rows.size == 0:
                 out.append(None)
                 continue
             pick = self.rng.integers(0, rows.size, self.silhouette_points)
-            # Softened so that a point a pixel off the edge is not treated as far outside.
-            soft = cv2.GaussianBlur(mask.astype(np.float32), (0, 0), 1.5)
+            # Grown and softened so that a point a few pixels off the outline (a model limb
+            # a little wider than the person's) is not treated as far outside.
+            soft = cv2.GaussianBlur(cv2.dilate(mask.astype(np.uint8), _ERODE).astype(
+                np.float32), (0, 0), 1.5)
             out.append((soft, cols[pick].astype(np.float32), rows[pick].astype(np.float32)))
         self._foreground = out
 
@@ -739,7 +748,7 @@ class ImageLikelihood:
             self._subsets[key] = subsets
         return self._subsets[key]
 
-    def evaluate(self, images, seg2world, previous=None, segments=None):
+    def evaluate(self, images, seg2world, previous=None, segments=None, with_coverage=True):
         """Log-likelihood of every particle (eqs. 3, 4, 10-12).
 
         Parameters
@@ -756,6 +765,9 @@ class ImageLikelihood:
         segments : sequence of int, optional
             Compare only the points on these segments (the factors of eq. 12 that a change of
             some limbs' angles can alter); default all.
+        with_coverage : bool
+            Weigh the foreground coverage (False: ``coverage`` is 0 and ``covered`` NaN; a
+            caller that keeps :meth:`capsule_hits` updates it itself).
 
         Returns
         -------
@@ -804,7 +816,7 @@ class ImageLikelihood:
                 good[part] += b
                 weight[part] += c
         for cam, fg in zip(self.cameras, self._foreground):
-            if fg is None:
+            if fg is None or not with_coverage:
                 continue
             n_fg += len(fg[1])
             for start in range(0, N, _CHUNK):
@@ -843,6 +855,60 @@ class ImageLikelihood:
                 hits += self._covered(cam, seg2world, fg[1], fg[2]).sum(axis=1)
                 count += len(fg[1])
         return hits / count if count else np.full(len(hits), np.nan)
+
+    def capsule_hits(self, seg2world, segments=None):
+        """Which drawn foreground pixels each capsule covers, per view.
+
+        Parameters
+        ----------
+        seg2world : array, shape (N, S, 4, 4)
+        segments : sequence of int, optional
+            Only the capsules of these segments (default all).
+
+        Returns
+        -------
+        capsules : array of int
+            The capsules (occluders) measured.
+        hits : list of (array of bool, shape (N, len(capsules), K)) or None
+            Per view (None where the view has no foreground mask).
+        """
+        occ = self.occluders
+        caps = np.arange(len(occ.segment)) if segments is None else \
+            np.flatnonzero(np.isin(occ.segment, segments))
+        out = []
+        for cam, fg in zip(self.cameras, self._foreground):
+            if fg is None:
+                out.append(None)
+                continue
+            C = self._cam_from_seg(cam, np.asarray(seg2world))
+            hits = np.empty((C.shape[0], len(caps), len(fg[1])), bool)
+            for i, o in enumerate(caps):
+                dist2, radius, _ = self._capsule_distance(self._capsule(cam, C, o), fg[1][None],
+                                                          fg[2][None])
+                hits[:, i] = dist2 < radius * radius
+            out.append(hits)
+        return caps, out
+
+    def coverage_from_hits(self, hits):
+        """The coverage term and covered share from all capsules' hits (:meth:`capsule_hits`).
+
+        Returns
+        -------
+        coverage, covered : array, shape (N,)
+            As in :class:`LikelihoodResult`.
+        """
+        views = [h for h in hits if h is not None]
+        if not views:
+            return 0.0, np.nan
+        floor = self.silhouette_floor
+        coverage, covered, count = 0.0, 0.0, 0
+        for h in views:
+            any_hit = h.any(axis=1)
+            covered = covered + any_hit.sum(axis=1)
+            coverage = coverage + self.silhouette * np.where(any_hit, 0.0, np.log(floor)).sum(
+                axis=1)
+            count += h.shape[2]
+        return self.beta * coverage, covered / count
 
     def _covered(self, cam, seg2world, u, v):
         """Whether some limb's capsule covers each pixel, (N, K) float32."""

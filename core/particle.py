@@ -474,7 +474,10 @@ class ParticleFilter:
 
     def _anneal(self, images, state, seg2world, previous, result):
         """The annealing passes of partitioned sampling (see ``layers``)."""
+        lik = self.likelihood
         per_segment, coverage = result.per_segment.copy(), result.coverage
+        # Which foreground pixels each limb covers: a group's move changes its limbs' only.
+        _, hits = lik.capsule_hits(seg2world)
         for layer in range(self.layers):
             scale = self.layer_scale * 0.5 ** layer
             for cols, segments in self.groups:
@@ -482,16 +485,21 @@ class ParticleFilter:
                 index = systematic_resample(w, self.rng)
                 state = self.prior.perturb({k: v[index] for k, v in state.items()}, cols,
                                            scale, self.rng)
-                per_segment, coverage = per_segment[index], coverage[index]
+                per_segment = per_segment[index]
+                hits = [None if h is None else h[index] for h in hits]
                 if previous is not None:
                     previous = (previous[0], previous[1][index])
                 roots, angles = self.prior.poses(state)
                 seg2world = self.kinematics.seg2world(roots, angles)
-                part = self.likelihood.evaluate(images, seg2world, previous, segments=segments)
+                part = lik.evaluate(images, seg2world, previous, segments=segments,
+                                    with_coverage=False)
                 per_segment[:, segments] = part.per_segment[:, segments]
-                # The coverage of the foreground depends on every limb: weighed in full.
-                coverage = part.coverage
-        return state, seg2world, self.likelihood.evaluate(images, seg2world, previous)
+                caps, moved = lik.capsule_hits(seg2world, segments)
+                for h, m in zip(hits, moved):
+                    if h is not None:
+                        h[:, caps] = m
+                coverage, _ = lik.coverage_from_hits(hits)
+        return state, seg2world, lik.evaluate(images, seg2world, previous)
 
     def measure(self, roots, angles):
         """The likelihood's full answer for given poses in the last frame :meth:`step`

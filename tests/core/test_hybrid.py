@@ -93,9 +93,10 @@ def test_hybrid_beats_the_differential_tracker_on_fast_motion(brisk, brisk_runs)
     scene, joints, body, poses = brisk
     alone = mpjpe(brisk_runs["differential"], joints)
     guided = mpjpe(brisk_runs["hybrid"], joints)
-    # The differential tracker alone loses the swinging leg (about 15 cm off at the end).
-    assert alone[-1] > 0.1
-    assert guided.mean() < 0.4 * alone.mean() and guided[-1] < 0.4 * alone[-1]
+    # The differential tracker alone loses the swinging leg for a while (over 10 cm off; its
+    # silhouette search finds it again later).
+    assert alone.max() > 0.1
+    assert guided.mean() < 0.4 * alone.mean() and guided.max() < 0.5 * alone.max()
 
 
 def test_the_same_seed_gives_the_same_track(slow):
@@ -307,3 +308,47 @@ def test_command_line_runs_the_hybrid(tmp_path):
                          capture_output=True, text=True, env=env, timeout=300)
     assert bad.returncode != 0 and "needs a calibration" in bad.stderr
     assert len(bad.stderr.strip().splitlines()) == 1
+
+
+# -- status from the silhouette -----------------------------------------------------------------
+
+
+def test_coverage_status_thresholds():
+    drop, limb = hybrid.COVERAGE_DROP, hybrid.LIMB_ON_FOREGROUND
+    assert hybrid.coverage_status(0.9, 0.9) == "ok"
+    assert hybrid.coverage_status(0.9 - 1.5 * drop, 0.9) == "uncertain"
+    assert hybrid.coverage_status(0.9 - 2.5 * drop, 0.9) == "lost"
+    assert hybrid.coverage_status(float("nan"), 0.9) == "ok"
+    assert hybrid.coverage_status(0.9, 0.9, 0.9) == "ok"
+    assert hybrid.coverage_status(0.9, 0.9, 0.8 * limb) == "uncertain"
+    assert hybrid.coverage_status(0.9, 0.9, 0.4 * limb) == "lost"
+
+
+def test_a_pose_off_the_silhouette_is_not_ok(slow):
+    """The refinement can fit the image motion of limbs that slid off the body; their points
+    on the background, or the foreground they no longer cover, flag the frame."""
+    from zoopraxis.core import render
+
+    scene, joints, body, poses = slow
+    pf = particle.ParticleFilter(body, scene.cameras, SmoothMotionPrior(body), n_particles=10,
+                                 silhouette=1.0)
+    masks = [render.render(c, body.seg2world(poses[3]), body.primitives(), want=()).label >= 0
+             for c in scene.cameras]
+    pf.start([scene.render_frame(2, c)[0] for c in range(len(scene.cameras))], poses[2])
+    pf.step([scene.render_frame(3, c)[0] for c in range(len(scene.cameras))], masks)
+    reference = hybrid.covered_at(pf, poses[3])
+    assert reference > 0.9
+    covered, limb = hybrid.silhouette_fit(pf, poses[3])
+    assert covered == reference and limb > 0.8
+    assert hybrid.coverage_status(covered, reference, limb) == "ok"
+    arms_off = poses[3].copy()
+    for dof in ("l_shoulder_abd", "r_shoulder_abd"):
+        arms_off.angles[body.dof_index(dof)] += 0.9
+    for dof in ("l_shoulder_flex", "r_shoulder_flex"):
+        arms_off.angles[body.dof_index(dof)] += 0.6
+    covered, limb = hybrid.silhouette_fit(pf, arms_off)
+    assert limb < 0.5 and hybrid.coverage_status(covered, reference, limb) != "ok"
+    away = poses[3].copy()
+    away.root[:3, 3] += [0.25, 0.25, 0.0]
+    covered, limb = hybrid.silhouette_fit(pf, away)
+    assert hybrid.coverage_status(covered, reference, limb) == "lost"

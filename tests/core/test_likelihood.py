@@ -317,3 +317,26 @@ def test_silhouette_cue_is_two_sided(take):
     assert np.argmax(gain) == 0 and gain[0] > gain[1] + 30 and gain[0] > gain[2] + 150
     with pytest.raises(ZoopraxisError, match=r"view 'cam-0.87': foreground mask is 10x10"):
         lik.set_foreground([np.zeros((10, 10), bool)])
+
+
+def test_capsule_hits_give_the_coverage_term(take, rng):
+    body, cameras, _, roots, angles = take
+    lik = likelihood.ImageLikelihood(body, cameras, silhouette=1.0, seed=11)
+    masks = [silhouette(body, c, roots[5], angles[5]) for c in cameras]
+    lik.set_foreground(masks)
+    kin = BatchKinematics(body)
+    T = kin.seg2world(np.broadcast_to(roots[5], (20, 4, 4)),
+                      angles[5] + rng.normal(0, 0.2, (20, body.n_dofs)))
+    res = evaluate(lik, take, 5, angles[5][None], views=(0, 1))   # sets the reference
+    lik.set_foreground(masks)
+    full = lik.evaluate([likelihood.prepare_image(take[2][5][v]) for v in (0, 1)], T)
+    caps, hits = lik.capsule_hits(T)
+    coverage, covered = lik.coverage_from_hits(hits)
+    np.testing.assert_allclose(coverage, full.coverage, rtol=1e-5)
+    np.testing.assert_allclose(covered, full.covered)
+    assert np.ptp(covered) > 0.05
+    arm = [body.segment_names.index("l_forearm")]
+    some, part = lik.capsule_hits(T, arm)
+    assert 0 < len(some) < len(caps)
+    np.testing.assert_array_equal(part[1], hits[1][:, some])
+    assert res.coverage.shape == (1,)
