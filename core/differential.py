@@ -42,6 +42,7 @@ class Settings:
     levels: int = 3                   # pyramid levels (0 = working resolution)
     iterations: tuple = (4, 4, 3)     # Gauss-Newton iterations per level, coarse to fine
     stride: int = 2                   # pixel subsampling of the template at the finest level
+    finest: int = 0                   # finest pyramid level solved (1: half resolution, faster)
     max_points: int = 5000            # per view and level
     smooth_sigma: float = 1.0         # Gaussian pre-smoothing of the grey images, pixels
     flow_weight: float = 1.0          # frame-to-frame image motion term
@@ -96,9 +97,10 @@ class ViewImages:
     stacks: list
     foreground: np.ndarray = None
     sdf: list = None
+    known: np.ndarray = None      # where the background model has seen the background
 
 
-def prepare_images(gray, levels, smooth_sigma, foreground=None):
+def prepare_images(gray, levels, smooth_sigma, foreground=None, known=None):
     """Pyramid, gradients and silhouette distance images of one frame of one view."""
     g = np.asarray(gray, np.float32)
     if smooth_sigma > 0:
@@ -115,7 +117,7 @@ def prepare_images(gray, levels, smooth_sigma, foreground=None):
             if level:
                 m = cv2.pyrDown(m)
             sdf.append(image_with_gradients(signed_distance(m > 0.5)))
-    return ViewImages(pyr, stacks, foreground, sdf)
+    return ViewImages(pyr, stacks, foreground, sdf, known)
 
 
 @dataclass
@@ -245,6 +247,9 @@ class DifferentialTracker:
         seg2world = [self.body.seg2world(state.pose(c)) for c in range(len(images_t))]
         world2seg = [se3.invert(T) for T in seg2world]
         for level in range(s.levels):
+            if level < min(s.finest, s.levels - 1):
+                out.append(None)        # finer than the tracker solves
+                continue
             per_view = []
             for c, (im, rr) in enumerate(zip(images_t, renders)):
                 step = 2 ** level
@@ -308,7 +313,7 @@ class DifferentialTracker:
         """
         self.anchor_terms = self.template_terms(state, images, renders)
         for per_view in self.anchor_terms:
-            for t in per_view:
+            for t in per_view or []:
                 t.name = "anchor"
 
     # -- rendering -------------------------------------------------------------------------------
@@ -430,25 +435,30 @@ class DifferentialTracker:
         if all(d is None for d in sdfs):
             return state, report
         labels = [r.label for r in report.renders]
+        known = [im.known for im in images_t1]
         # One view's silhouette leaves a limb's depth free (and scaled-orthographic views
         # fit perspective plates only roughly): the search needs two calibrated views.
         if (self.settings.limb_search and self.calibrated
                 and sum(d is not None for d in sdfs) >= 2):
-            angles, moved = self.search.search(state, sdfs, labels)
+            angles, moved = self.search.search(state, sdfs, labels, known)
             if moved:
                 proposal = state.copy()
                 proposal.angles = angles
                 state2, report2 = self._step(state_t, images_t, images_t1, previous, renders_t,
                                              proposal, flow)
-                if np.nanmean(report2.iou) >= np.nanmean(report.iou) - 0.005:
+                # keep the refit only if the whole frame is explained better: the silhouettes
+                # overlap more and the least-squares cost (image motion, anchor appearance,
+                # contours) is lower
+                if (np.nanmean(report2.iou) > np.nanmean(report.iou)
+                        and report2.cost < report.cost):
                     report2.recovered = [name for name, _ in moved]
                     state, report = state2, report2
                     labels = [r.label for r in report.renders]
         report.limb_fit = self.search.fit(state, sdfs, labels)
         report.unexplained = np.array([
             np.nan if d is None else
-            unexplained_foreground(d < 0, lab).sum() / max(int((lab >= 0).sum()), 1)
-            for d, lab in zip(sdfs, labels)])
+            unexplained_foreground(d < 0, lab, k).sum() / max(int((lab >= 0).sum()), 1)
+            for d, lab, k in zip(sdfs, labels, known)])
         return state, report
 
     def _step(self, state_t, images_t, images_t1, previous, renders_t, start, flow=None):
@@ -461,7 +471,7 @@ class DifferentialTracker:
         prior_center = state.copy()
         total_iters = 0
         cost = 0.0
-        for level in reversed(range(s.levels)):
+        for level in reversed(range(min(s.finest, s.levels - 1), s.levels)):
             sil = self.contour_terms(state, level) if use_sil else None
             terms_by_view = []
             for c in range(V):

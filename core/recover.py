@@ -28,6 +28,10 @@ POINTS_PER_PRIMITIVE = 48
 SHRINK = 0.6            # points lie this far out towards the surface (robust to other builds)
 SDF_SCALE = 3.0         # pixels of signed distance for a full +-1 score
 SHARED_CREDIT = 0.4     # credit for foreground that the rest of the body already covers
+# Search a limb scoring below this. An arm in front of or behind the torso in most views
+# scores low even where it belongs (its points fall on the rest of the body): search arms only
+# when they are mostly outside the silhouettes.
+POOR = {"leg": 0.3, "arm": 0.0}
 UNEXPLAINED_BONUS = 0.6  # extra credit for foreground that no part of the model covers
 UNEXPLAINED_MIN_PX = 5  # unexplained foreground thinner than this is the build, not a limb
 
@@ -101,11 +105,15 @@ def interior_points(prims, n=POINTS_PER_PRIMITIVE, shrink=SHRINK, seed=0):
     return np.concatenate(segs), np.concatenate(pts)
 
 
-def unexplained_foreground(foreground, labels, min_px=UNEXPLAINED_MIN_PX):
+def unexplained_foreground(foreground, labels, known=None, min_px=UNEXPLAINED_MIN_PX):
     """Foreground that the model's support map does not cover, in blobs at least ``min_px``
-    thick (a thin rim is a body of another build than the model's, not a missing limb)."""
+    thick (a thin rim is a body of another build than the model's, not a missing limb), where
+    the background is known (elsewhere "foreground" only means "never seen empty")."""
     model = cv2.dilate((labels >= 0).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
-    rest = (foreground & ~model).astype(np.uint8)
+    rest = foreground & ~model
+    if known is not None:
+        rest &= known
+    rest = rest.astype(np.uint8)
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (min_px, min_px))
     return cv2.morphologyEx(rest, cv2.MORPH_OPEN, kernel) > 0
 
@@ -121,9 +129,10 @@ class LimbSearch:
     margin : float
         How much better (in the score's units, -1..1 per point) a limb's best draw must be
         than its current pose to be proposed.
-    poor : float
-        Limbs scoring below this are searched (a limb inside the silhouettes is left to the
-        image-motion step, which is more precise).
+    poor : dict of str to float, optional
+        Per limb kind ("leg", "arm"), the score below which a limb is searched (a limb inside
+        the silhouettes is left to the image-motion step, which is more precise). Default
+        :data:`POOR`.
     attract : tuple of str
         Limbs ("leg", "arm") that are also searched, and drawn, towards foreground no part of
         the model explains. Legs only by default: arms hang beside a torso that the model's
@@ -131,9 +140,9 @@ class LimbSearch:
     seed : int
     """
 
-    def __init__(self, body, draws=160, margin=0.08, poor=0.3, seed=0, attract=("leg",)):
+    def __init__(self, body, draws=160, margin=0.08, poor=None, seed=0, attract=("leg",)):
         self.body = body
-        self.poor = poor
+        self.poor = dict(POOR if poor is None else poor)
         self.attract = attract
         self.draws = draws
         self.margin = margin
@@ -192,7 +201,7 @@ class LimbSearch:
             used += 1
         return total / max(used, 1)
 
-    def search(self, state, sdfs, rest_labels):
+    def search(self, state, sdfs, rest_labels, known=None):
         """Best pose of each limb in turn; returns the new angles and the limbs that moved.
 
         Parameters
@@ -202,6 +211,8 @@ class LimbSearch:
             Per view at the cameras' resolution.
         rest_labels : list of array of int (H, W) or None
             The model's support map at ``state`` per view (segment labels, -1 background).
+        known : list of array of bool (H, W) or None, optional
+            Where each view's background model has seen the background.
 
         Returns
         -------
@@ -212,8 +223,10 @@ class LimbSearch:
         angles = state.angles.copy()
         moved = []
         self.last_scores = {}
-        unexplained = [None if d is None or lab is None else unexplained_foreground(d < 0, lab)
-                       for d, lab in zip(sdfs, rest_labels)]
+        known = known or [None] * len(sdfs)
+        unexplained = [None if d is None or lab is None else
+                       unexplained_foreground(d < 0, lab, k)
+                       for d, lab, k in zip(sdfs, rest_labels, known)]
         for group in self.groups:
             rest = [None if lab is None else (lab >= 0) & ~np.isin(lab, group.segments)
                     for lab in rest_labels]
@@ -270,7 +283,8 @@ class LimbSearch:
         current = self.score(roots, angles[None], group.segments, cameras, sdfs, rest,
                              unexplained)[0]
         self.last_scores[group.name] = current
-        if current >= self.poor and not any(u is not None and u.any() for u in unexplained):
+        poor = self.poor.get(group.name.split()[-1], 0.0)
+        if current >= poor and not any(u is not None and u.any() for u in unexplained):
             return angles, 0.0
         centre = angles
         lower, upper = self.body.lower, self.body.upper

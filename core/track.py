@@ -328,7 +328,8 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
         def one(c):
             fg = backgrounds[c].foreground(colours[c]) if use_bg[c] else None
             return prepare_images(to_gray_float(colours[c]), settings.levels,
-                                  settings.smooth_sigma, fg)
+                                  settings.smooth_sigma, fg,
+                                  backgrounds[c].known if use_bg[c] else None)
 
         return tracker.map_views(one, len(colours))
 
