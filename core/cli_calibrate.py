@@ -3,7 +3,7 @@
 import argparse
 from pathlib import Path
 
-from .cli_common import open_plates, parse_view_values
+from .cli_common import add_output_arguments, check_output, open_plates, parse_view_values
 from .errors import ZoopraxisError
 from .progress import ConsoleProgress
 
@@ -36,8 +36,7 @@ def build_parser():
                         "the most cameras)")
     p.add_argument("--max-rms", type=float, default=None,
                    help="refuse a camera whose reprojection RMS is above this, pixels (1.0)")
-    p.add_argument("--out", required=True, help="calibration.json to write")
-    p.add_argument("--force", action="store_true", help="overwrite --out")
+    add_output_arguments(p, "calibration.json")
     return p
 
 
@@ -47,11 +46,9 @@ def main(argv):
     from .plates import parse_frame_range
 
     args = build_parser().parse_args(argv)
-    out = Path(args.out)
-    if out.suffix.lower() != ".json":
-        raise ZoopraxisError(f"{out}: calibration is written as JSON; use a .json file name")
-    if out.exists() and not args.force:
-        raise ZoopraxisError(f"{out}: already exists (use --force to overwrite it)")
+    if Path(args.out).suffix.lower() != ".json":
+        raise ZoopraxisError(f"{args.out}: calibration is written as JSON; use a .json file name")
+    out = check_output(args.out, args.force)
     board = cal.parse_board(args.board)
     max_rms = cal.MAX_RMS_PX if args.max_rms is None else args.max_rms
     if not max_rms > 0:

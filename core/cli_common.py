@@ -28,6 +28,22 @@ def parse_view_values(items, what, convert=str):
     return out
 
 
+def add_output_arguments(parser, what):
+    """``--out`` (the file to write, described by ``what``) and ``--force``."""
+    parser.add_argument("--out", required=True, help=f"{what} to write")
+    parser.add_argument("--force", action="store_true", help="replace an existing --out file")
+
+
+def check_output(path, force):
+    """The output path as a Path; refuses to replace an existing file without --force."""
+    from pathlib import Path
+
+    path = Path(path)
+    if path.exists() and not force:
+        raise ZoopraxisError(f"{path}: file exists (use --force to replace it)")
+    return path
+
+
 def open_plates(paths, fps=None):
     """Open ``{view: path}`` plates; returns ``{view: Plate}`` (one-line errors per path)."""
     from .plates import open_plate

@@ -3,8 +3,8 @@
 import argparse
 import json
 import sys
-from pathlib import Path
 
+from .cli_common import add_output_arguments, check_output
 from .errors import ZoopraxisError
 
 
@@ -26,8 +26,7 @@ def build_parser():
     p.add_argument("--no-pose-prior", action="store_true",
                    help="in frames clicked in one view, choose the limbs' depth without the "
                         "pose prior learned from motion capture")
-    p.add_argument("--out", required=True, help="init.json to write")
-    p.add_argument("--force", action="store_true", help="overwrite --out")
+    add_output_arguments(p, "init.json")
     return p
 
 
@@ -40,9 +39,7 @@ def main(argv):
     from .markers import check_markers, read_markers
 
     args = build_parser().parse_args(argv)
-    out = Path(args.out)
-    if out.exists() and not args.force:
-        raise ZoopraxisError(f"{out}: already exists (use --force to overwrite it)")
+    out = check_output(args.out, args.force)
     if args.template not in TEMPLATES:
         raise ZoopraxisError(f"--template: unknown body template '{args.template}' (expected "
                              f"one of {', '.join(TEMPLATES)})")

@@ -2,9 +2,8 @@
 
 import argparse
 import time
-from pathlib import Path
 
-from .cli_common import open_plates, parse_view_values
+from .cli_common import add_output_arguments, check_output, open_plates, parse_view_values
 from .errors import ZoopraxisError
 from .progress import ConsoleProgress
 
@@ -36,8 +35,7 @@ def build_parser():
                    help="after tracking, refine the limb lengths on the silhouettes and clicks "
                         "of the whole take and track again, keeping the better track "
                         "(differential tracker, calibrated views)")
-    p.add_argument("--out", required=True, help="result.json to write")
-    p.add_argument("--force", action="store_true", help="replace an existing result file")
+    add_output_arguments(p, "result.json")
     return p
 
 
@@ -46,9 +44,7 @@ def main(argv):
     from .result import write_result
 
     args = build_parser().parse_args(argv)
-    out = Path(args.out)
-    if out.exists() and not args.force:
-        raise ZoopraxisError(f"{out}: file exists (use --force to replace it)")
+    out = check_output(args.out, args.force)
     paths = parse_view_values(args.plate, "--plate")
     offsets = parse_view_values(args.offset, "--offset", int)
     unknown = [v for v in offsets if v not in paths]
