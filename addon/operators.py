@@ -33,6 +33,25 @@ def _reporter(operator):
     return lambda message: operator.report({'INFO'}, message)
 
 
+class _FileAction:
+    """A file chooser that hands the chosen path to one function of the add-on,
+    ``function(context, path, report=..., force=...)``; ``action`` names it as
+    ``(module, function)``. ``force`` is passed when the operator has an ``overwrite`` option.
+    """
+
+    action = None
+
+    def execute(self, context):
+        import importlib
+
+        module, name = self.action
+        function = getattr(importlib.import_module(f"{__package__}.{module}"), name)
+        kwargs = {"report": _reporter(self)}
+        if hasattr(self, "overwrite"):
+            kwargs["force"] = self.overwrite
+        return run(self, context, lambda: function(context, self.filepath, **kwargs))
+
+
 # --- plates -----------------------------------------------------------------------------------
 
 class ZOOPRAXIS_OT_load_plates(bpy.types.Operator, ImportHelper):
@@ -131,66 +150,44 @@ class ZOOPRAXIS_OT_add_joint_markers(bpy.types.Operator):
         return run(self, context, work)
 
 
-class ZOOPRAXIS_OT_export_markers(bpy.types.Operator, ExportHelper):
+class ZOOPRAXIS_OT_export_markers(_FileAction, bpy.types.Operator, ExportHelper):
     """Write the joint markers of all views to markers.json"""
     bl_idname = "zoopraxis.export_markers"
     bl_label = "Export Markers"
     filename_ext = ".json"
     filter_glob: StringProperty(default="*.json", options={'HIDDEN'})
     overwrite: BoolProperty(name="Overwrite", description="Replace an existing file")
-
-    def execute(self, context):
-        from .markers import export_markers
-
-        return run(self, context, lambda: export_markers(context, self.filepath,
-                                                         force=self.overwrite,
-                                                         report=_reporter(self)))
+    action = ("markers", "export_markers")
 
 
-class ZOOPRAXIS_OT_import_markers(bpy.types.Operator, ImportHelper):
+class ZOOPRAXIS_OT_import_markers(_FileAction, bpy.types.Operator, ImportHelper):
     """Add the joint markers of a markers.json file to the views' clips"""
     bl_idname = "zoopraxis.import_markers"
     bl_label = "Import Markers"
     bl_options = {'REGISTER', 'UNDO'}
     filter_glob: StringProperty(default="*.json", options={'HIDDEN'})
-
-    def execute(self, context):
-        from .markers import import_markers
-
-        return run(self, context, lambda: import_markers(context, self.filepath,
-                                                         report=_reporter(self)))
+    action = ("markers", "import_markers")
 
 
 # --- calibration ------------------------------------------------------------------------------
 
-class ZOOPRAXIS_OT_load_calibration(bpy.types.Operator, ImportHelper):
+class ZOOPRAXIS_OT_load_calibration(_FileAction, bpy.types.Operator, ImportHelper):
     """Load calibration.json or a Pose2Sim/anipose TOML file as camera objects"""
     bl_idname = "zoopraxis.load_calibration"
     bl_label = "Load Calibration"
     bl_options = {'REGISTER', 'UNDO'}
     filter_glob: StringProperty(default="*.json;*.toml", options={'HIDDEN'})
-
-    def execute(self, context):
-        from .calibration import load_calibration
-
-        return run(self, context, lambda: load_calibration(context, self.filepath,
-                                                           report=_reporter(self)))
+    action = ("calibration", "load_calibration")
 
 
-class ZOOPRAXIS_OT_export_calibration(bpy.types.Operator, ExportHelper):
+class ZOOPRAXIS_OT_export_calibration(_FileAction, bpy.types.Operator, ExportHelper):
     """Write the views' camera objects to calibration.json"""
     bl_idname = "zoopraxis.export_calibration"
     bl_label = "Export Calibration"
     filename_ext = ".json"
     filter_glob: StringProperty(default="*.json", options={'HIDDEN'})
     overwrite: BoolProperty(name="Overwrite", description="Replace an existing file")
-
-    def execute(self, context):
-        from .calibration import export_calibration
-
-        return run(self, context, lambda: export_calibration(context, self.filepath,
-                                                             force=self.overwrite,
-                                                             report=_reporter(self)))
+    action = ("calibration", "export_calibration")
 
 
 class ZOOPRAXIS_OT_calibrate_board(JobOperator, bpy.types.Operator):

@@ -27,7 +27,7 @@ def scene_state():
             scene.frame_start, scene.frame_end)
 
 
-def test_load_plates_and_calibration(blender):
+def test_load_plates_and_calibration(blender, tmp_path):
     from zoopraxis.addon.calibration import cameras_from_scene
     from zoopraxis.core.calibfile import read_calibration
 
@@ -51,6 +51,16 @@ def test_load_plates_and_calibration(blender):
     X = np.random.default_rng(2345).uniform([-1, -1, 0], [1, 1, 2], (40, 3))
     for name, camera in cameras_from_scene(blender).items():
         np.testing.assert_allclose(camera.project(X), truth[name].project(X), atol=0.01)
+
+    # and back out to calibration.json, never over an existing file unless asked
+    out = tmp_path / "calibration.json"
+    bpy.ops.zoopraxis.export_calibration(filepath=str(out))
+    with pytest.raises(RuntimeError, match="exists"):
+        bpy.ops.zoopraxis.export_calibration(filepath=str(out))
+    bpy.ops.zoopraxis.export_calibration(filepath=str(out), overwrite=True)
+    written = read_calibration(out)
+    for name in truth:
+        np.testing.assert_allclose(written[name].project(X), truth[name].project(X), atol=0.01)
 
 
 def test_unreadable_plate_and_unequal_lengths_leave_scene_alone(blender, tmp_path):
