@@ -108,6 +108,56 @@ def _blend_states(a, b, w):
     return out
 
 
+def blend_weights(forward, backward, smooth=5):
+    """How much of the backward pass each frame between two anchors takes (0: all forward).
+
+    By distance, the nearer anchor's pass counts more; by quality, a pass that has lost the
+    body (a grey residual well above the two passes' median, or a poorer silhouette overlap)
+    counts less, so that a blend does not drag a good pass towards a lost one.
+
+    Parameters
+    ----------
+    forward, backward : list of StepReport
+        The two passes' reports at the frames strictly between the anchors, in frame order.
+    smooth : int
+        Frames of the running mean that keeps the weights from jumping.
+
+    Returns
+    -------
+    array, shape (n,)
+    """
+    n = len(forward)
+    if n == 0:
+        return np.zeros(0)
+    w = np.arange(1, n + 1) / (n + 1)
+
+    def quality(reports):
+        r = np.array([np.max(rep.residual) for rep in reports], float)
+        iou = np.array([np.nanmean(rep.iou) if np.isfinite(rep.iou).any() else np.nan
+                        for rep in reports], float)
+        return r, iou
+
+    rf, iou_f = quality(forward)
+    rb, iou_b = quality(backward)
+    # the better pass's typical values are the reference (a whole pass may be lost)
+    r_ref = min(np.median(rf), np.median(rb)) + 1e-9
+    medians = [np.nanmedian(i) for i in (iou_f, iou_b) if np.isfinite(i).any()]
+    iou_ref = max(medians) if medians else np.nan
+
+    def goodness(r, iou):
+        g = np.exp(-np.maximum(r / r_ref - 1.0, 0.0))
+        if np.isfinite(iou_ref):
+            g *= np.clip(np.nan_to_num(iou, nan=iou_ref) / iou_ref, 0.05, 1.0) ** 2
+        return g
+
+    gf, gb = goodness(rf, iou_f), goodness(rb, iou_b)
+    if smooth > 1 and n > 1:
+        kernel = np.ones(min(smooth, n)) / min(smooth, n)
+        gf = np.convolve(np.pad(gf, len(kernel) // 2, mode="edge"), kernel, "valid")[:n]
+        gb = np.convolve(np.pad(gb, len(kernel) // 2, mode="edge"), kernel, "valid")[:n]
+    return w * gb / ((1 - w) * gf + w * gb + 1e-12)
+
+
 def take_backgrounds(tracker, source, views, frames, inside, state_at, log):
     """Background model per view, whether to use it, and the first anchor's silhouette fit
     and overlap (the references for the frames' status).
@@ -194,9 +244,14 @@ def frame_status(rel_fit, rel_iou, residual_ratio):
     rel_fit = np.asarray(rel_fit, float)
     rel_iou = np.asarray(rel_iou, float)
     rel_fit, rel_iou = rel_fit[np.isfinite(rel_fit)], rel_iou[np.isfinite(rel_iou)]
+    # Fast motion raises the grey residual of a good fit too: where silhouettes are measured,
+    # a high residual alone makes a frame uncertain, and lost only if a silhouette doubts it.
+    doubted = ((len(rel_fit) and rel_fit.min() < FIT_UNCERTAIN)
+               or (len(rel_iou) and rel_iou.min() < IOU_UNCERTAIN)
+               or not (len(rel_fit) or len(rel_iou)))
     if ((len(rel_fit) and np.median(rel_fit) < FIT_LOST)
             or (len(rel_iou) and np.median(rel_iou) < IOU_LOST)
-            or residual_ratio > RESIDUAL_LOST):
+            or (residual_ratio > RESIDUAL_LOST and doubted)):
         return "lost"
     if ((len(rel_fit) and rel_fit.min() < FIT_UNCERTAIN)
             or (len(rel_iou) and rel_iou.min() < IOU_UNCERTAIN)
@@ -387,8 +442,9 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
                     states[f], reports[f] = st, rep
                 continue
             bwd = run(b, a)
-            for f in range(a + 1, b):
-                w = (f - a) / (b - a)
+            weights = blend_weights([fwd[f][1] for f in range(a + 1, b)],
+                                    [bwd[f][1] for f in range(a + 1, b)])
+            for f, w in zip(range(a + 1, b), weights):
                 states[f] = _blend_states(fwd[f][0], bwd[f][0], w)
                 reports[f] = _blend_report(fwd[f][1], bwd[f][1], w,
                                            blended_fit(states[f], f))

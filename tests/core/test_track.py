@@ -152,3 +152,31 @@ def test_frame_status_from_silhouettes_and_residuals():
     assert T.frame_status([1.0, 1.0], [0.4, 0.5], 1.0) == "lost"           # shrunk into it
     assert T.frame_status([nan], [nan], 3.0) == "uncertain"                # no masks: residual
     assert T.frame_status([nan], [nan], 5.0) == "lost"
+    # fast motion: a high residual with silhouettes that fit is uncertain, not lost
+    assert T.frame_status([1.0, 0.95], [1.0, 0.9], 5.0) == "uncertain"
+    assert T.frame_status([1.0, 0.95], [1.0, 0.55], 5.0) == "lost"
+
+
+def test_blend_weights_trust_the_pass_that_holds():
+    from zoopraxis.core.differential import StepReport
+
+    def reports(residuals, ious):
+        return [StepReport(np.array([r, r]), np.array([i, i]), 0.0, 1)
+                for r, i in zip(residuals, ious)]
+
+    n = 9
+    good = reports([3.0] * n, [0.7] * n)
+    w = T.blend_weights(good, reports([3.0] * n, [0.7] * n))
+    np.testing.assert_allclose(w, np.arange(1, n + 1) / (n + 1))   # by distance alone
+    # the backward pass lost the body over the first frames: the blend keeps the forward one
+    lost = reports([12.0] * 5 + [3.0] * 4, [0.3] * 5 + [0.7] * 4)
+    w = T.blend_weights(good, lost)
+    assert np.all(w[:3] < 0.02)
+    assert w[-1] > 0.85
+    # and the other way round
+    w = T.blend_weights(lost, good)
+    assert np.all(w[:3] > 0.9)
+    # no silhouettes (no background model): residuals alone decide
+    w = T.blend_weights(reports([3.0] * n, [np.nan] * n),
+                        reports([12.0] * n, [np.nan] * n))
+    assert np.all(w[:5] < 0.05) and np.all(w < 0.35)
