@@ -377,7 +377,9 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
         if prior == "walk":
             return WalkingPrior(body, fps=fps)
         sigma_position, _ = smooth_sigmas(body, fps)
-        return SmoothMotionPrior(body, fps=fps, sigma_position=prior_scale * sigma_position)
+        # The filter alone must follow accelerations through its layers' moves.
+        return SmoothMotionPrior(body, fps=fps, sigma_position=prior_scale * sigma_position,
+                                 carry_moves=tracker == "particle")
 
     anchor_frames = [a.frame for a in inside]
     passes = []

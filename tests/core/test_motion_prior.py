@@ -405,6 +405,10 @@ def test_smooth_prior_perturb_moves_one_group_and_its_velocity(body, rng):
     np.testing.assert_allclose(d.std(axis=0)[cols - 6], 2.0 * prior.sigma_position[cols],
                                rtol=0.15)
     assert moved["dangles"] is state["dangles"]
+    carried = mp.SmoothMotionPrior(body, carry_moves=True).perturb(state, cols, 2.0, rng)
+    np.testing.assert_allclose(carried["dangles"] - state["dangles"],
+                               carried["angles"] - state["angles"], atol=1e-12)
+    assert np.any(carried["dangles"] != state["dangles"])
     assert np.all(moved["angles"] >= body.lower) and np.all(moved["angles"] <= body.upper)
     root = prior.perturb(state, np.arange(6), 1.0, rng)
     assert np.all(root["angles"] == state["angles"])
