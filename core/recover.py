@@ -32,6 +32,7 @@ SHARED_CREDIT = 0.4     # credit for foreground that the rest of the body alread
 # scores low even where it belongs (its points fall on the rest of the body): search arms only
 # when they are mostly outside the silhouettes.
 POOR = {"leg": 0.3, "arm": 0.0}
+PROBE_DRAWS = 48        # draws of the quick check before a full search of a fitting limb
 UNEXPLAINED_BONUS = 0.6  # extra credit for foreground that no part of the model covers
 UNEXPLAINED_MIN_PX = 5  # unexplained foreground thinner than this is the build, not a limb
 
@@ -284,8 +285,19 @@ class LimbSearch:
                              unexplained)[0]
         self.last_scores[group.name] = current
         poor = self.poor.get(group.name.split()[-1], 0.0)
-        if current >= poor and not any(u is not None and u.any() for u in unexplained):
-            return angles, 0.0
+        if current >= poor:
+            if not any(u is not None and u.any() for u in unexplained):
+                return angles, 0.0
+            # The limb fits; only unexplained foreground could call it away. A cheap probe
+            # (few draws, the whole limb at once) decides whether a full search is worth it.
+            probe = np.repeat(angles[None], PROBE_DRAWS, axis=0)
+            probe[1:, group.dofs] = self.rng.uniform(self.body.lower[group.dofs],
+                                                     self.body.upper[group.dofs],
+                                                     size=(PROBE_DRAWS - 1, len(group.dofs)))
+            gain = self.score(roots, probe, group.segments, cameras, sdfs, rest,
+                              unexplained).max() - current
+            if gain < 0.5 * self.margin:
+                return angles, 0.0
         centre = angles
         lower, upper = self.body.lower, self.body.upper
         # Each stage: half the draws uniform over the joints' range, half around the current
