@@ -53,8 +53,8 @@ from .markers import check_markers
 from .motion_prior import SmoothMotionPrior, WalkingPrior, smooth_sigmas
 from .particle import ParticleFilter
 from .plates import to_gray_float
-from .track import (Cancelled, FrameSource, Initial, _blend_report, _blend_states,
-                    _make_result, silhouette_measures, take_backgrounds)
+from .track import (Cancelled, FrameSource, Initial, blend_report, blend_states, blend_weights,
+                    make_result, plan_passes, silhouette_measures, take_backgrounds)
 
 TRACKERS = ("particle", "hybrid")
 PRIORS = ("smooth", "walk")
@@ -382,14 +382,7 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
                                  carry_moves=tracker == "particle")
 
     anchor_frames = [a.frame for a in inside]
-    passes = []
-    if anchor_frames[0] > frames.start:
-        passes.append((anchor_frames[0], frames.start, None))
-    for a, b in zip(anchor_frames[:-1], anchor_frames[1:]):
-        passes.append((a, b, "blend"))
-    if anchor_frames[-1] < frames.stop - 1:
-        passes.append((anchor_frames[-1], frames.stop - 1, None))
-    total = sum(abs(b - a) * (2 if kind == "blend" else 1) for a, b, kind in passes)
+    passes, total = plan_passes(anchor_frames, frames)
     done = 0
     seeds = iter(range(seed, seed + 7919 * (len(passes) * 2 + 1), 7919))
     # The search draws as many poses as the filter has particles, shared among the groups.
@@ -468,12 +461,13 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
             bwd = run(b, a)
             tracked.setdefault(a, fwd[a])
             tracked.setdefault(b, bwd[b])
-            for f in range(a + 1, b):
-                w = (f - a) / (b - a)
-                (sf, rf, pf_, tf, ef, cf), (sb, rb, pb, tb, eb, cb) = fwd[f], bwd[f]
-                state = _blend_states(sf, sb, w)
+            between = range(a + 1, b)
+            weights = blend_weights([fwd[f][1] for f in between], [bwd[f][1] for f in between])
+            for f, w in zip(between, weights):
+                (sf, rf, pf_, *_), (sb, rb, pb, *_) = fwd[f], bwd[f]
+                state = blend_states(sf, sb, w)
                 near = fwd[f] if w < 0.5 else bwd[f]
-                tracked[f] = (state, _blend_report(rf, rb, w, blended_fit(state, f)),
+                tracked[f] = (state, blend_report(rf, rb, w, blended_fit(state, f)),
                               (1 - w) * pf_ + w * pb, near[3], near[4], near[5])
     except Cancelled as exc:
         cancelled = True
@@ -483,7 +477,7 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
     for a in anchor_frames:
         tracked.setdefault(a, (state_at(a), None, None, "ok", float(particles), np.nan))
 
-    result = _make_result(body, views, plates, factors,
+    result = make_result(body, views, plates, factors,
                           {f: item[0] for f, item in tracked.items()},
                           {f: item[1] for f, item in tracked.items()}, True, init,
                           anchor_frames, frames, cancelled, ref_fit, ref_iou)

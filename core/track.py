@@ -95,7 +95,7 @@ class FrameSource:
         return out
 
 
-def _blend_states(a, b, w):
+def blend_states(a, b, w):
     """Pose between two states: angles linearly, roots along the SE(3) geodesic (w: 0 -> a)."""
     out = a.copy()
     out.angles = (1 - w) * a.angles + w * b.angles
@@ -106,6 +106,35 @@ def _blend_states(a, b, w):
         out.cameras = [ca.replace(s=float(np.exp((1 - w) * np.log(ca.s) + w * np.log(cb.s))))
                        for ca, cb in zip(a.cameras, b.cameras)]
     return out
+
+
+def plan_passes(anchor_frames, frames):
+    """The tracking passes of a take: from the first anchor back to the take's start, between
+    each two anchors (forward, then backward, to be blended), and from the last anchor to the
+    end.
+
+    Parameters
+    ----------
+    anchor_frames : list of int
+        Sorted anchor frames inside ``frames``.
+    frames : range
+
+    Returns
+    -------
+    passes : list of (int, int, str or None)
+        ``(start, stop, kind)``, both ends included; kind "blend" between two anchors.
+    total : int
+        Frames the passes will track (a blended stretch counts twice): for progress.
+    """
+    passes = []
+    if anchor_frames[0] > frames.start:
+        passes.append((anchor_frames[0], frames.start, None))
+    for a, b in zip(anchor_frames[:-1], anchor_frames[1:]):
+        passes.append((a, b, "blend"))
+    if anchor_frames[-1] < frames.stop - 1:
+        passes.append((anchor_frames[-1], frames.stop - 1, None))
+    total = sum(abs(b - a) * (2 if kind == "blend" else 1) for a, b, kind in passes)
+    return passes, total
 
 
 def blend_weights(forward, backward, smooth=5):
@@ -260,7 +289,7 @@ def frame_status(rel_fit, rel_iou, residual_ratio):
     return "ok"
 
 
-def _blend_report(fwd, bwd, w, measured):
+def blend_report(fwd, bwd, w, measured):
     """Diagnostics of a blended frame: residuals weighted like the poses, the silhouette
     fit and overlap measured on the blended pose."""
     from .differential import StepReport
@@ -388,16 +417,8 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
 
         return tracker.map_views(one, len(colours))
 
-    # Plan: passes between anchors
     anchor_frames = [a.frame for a in inside]
-    passes = []
-    if anchor_frames[0] > frames.start:
-        passes.append((anchor_frames[0], frames.start, None))
-    for a, b in zip(anchor_frames[:-1], anchor_frames[1:]):
-        passes.append((a, b, "blend"))
-    if anchor_frames[-1] < frames.stop - 1:
-        passes.append((anchor_frames[-1], frames.stop - 1, None))
-    total = sum(abs(b - a) * (2 if kind == "blend" else 1) for a, b, kind in passes)
+    passes, total = plan_passes(anchor_frames, frames)
     done = 0
 
     states, reports = {}, {}
@@ -445,8 +466,8 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
             weights = blend_weights([fwd[f][1] for f in range(a + 1, b)],
                                     [bwd[f][1] for f in range(a + 1, b)])
             for f, w in zip(range(a + 1, b), weights):
-                states[f] = _blend_states(fwd[f][0], bwd[f][0], w)
-                reports[f] = _blend_report(fwd[f][1], bwd[f][1], w,
+                states[f] = blend_states(fwd[f][0], bwd[f][0], w)
+                reports[f] = blend_report(fwd[f][1], bwd[f][1], w,
                                            blended_fit(states[f], f))
     except Cancelled as exc:
         cancelled = True
@@ -455,11 +476,11 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
                 states[f], reports[f] = st, rep
         log("cancelled: keeping the frames tracked so far")
 
-    return _make_result(body, views, plates, factors, states, reports, calibrated, init,
+    return make_result(body, views, plates, factors, states, reports, calibrated, init,
                         anchor_frames, frames, cancelled, ref_fit, ref_iou)
 
 
-def _make_result(body, views, plates, factors, states, reports, calibrated, init,
+def make_result(body, views, plates, factors, states, reports, calibrated, init,
                  anchor_frames, frames, cancelled, ref_fit, ref_iou):
     order = sorted(states)
     F = len(order)

@@ -138,7 +138,7 @@ def test_blend_states_interpolates():
     cams = [ScaledOrthoCamera("a", (10, 10), s=10.0)]
     a = T.State(np.eye(4)[None], np.zeros(3), cams)
     b = T.State(se3.exp_se3([0.2, 0, 0, 0, 0, 0.4])[None], np.ones(3), [cams[0].replace(s=40.0)])
-    m = T._blend_states(a, b, 0.5)
+    m = T.blend_states(a, b, 0.5)
     assert np.allclose(m.angles, 0.5)
     assert np.allclose(se3.log_se3(m.roots[0]), [0.1, 0, 0, 0, 0, 0.2])
     assert np.isclose(m.cameras[0].s, 20.0)
