@@ -217,7 +217,7 @@ def test_calibrate_command_writes_calibration_json(scene, tmp_path, capsys):
     assert [c["name"] for c in data["cameras"]] == ["cam0", "cam1", "cam2"]
     # refuses to overwrite, and refuses a wrong board with a one-line reason
     assert cli.main(args + ["--out", str(out)]) == 2
-    assert "already exists" in capsys.readouterr().err
+    assert "file exists" in capsys.readouterr().err
     assert cli.main(["calibrate", "--board", "checkerboard:7x4:0.1", "--frames", "0:2",
                      "--plate", f"cam0={tmp_path / 'cam0'}", "--out",
                      str(tmp_path / "x.json")]) == 2

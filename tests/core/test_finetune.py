@@ -87,7 +87,8 @@ def test_finetune_brings_the_limbs_closer_and_the_track_no_worse(take):
     before = np.abs(limb_errors(out.body_before, truth))
     after = np.abs(limb_errors(out.body_after, truth))
     assert np.allclose(before, WRONG - 1)
-    assert after.max() < 0.03, after
+    # every refined length recovers at least 60 % of its error (9 % -> under 3.6 %)
+    assert after.max() < 0.4 * (WRONG - 1), after
     assert len(out.samples) >= 3 and out.samples[0] == 0
     # what fine-tuning returns tracks the take no worse than the first track
     first = np.linalg.norm(out.first.joints3d - joints, axis=2).mean()

@@ -503,7 +503,7 @@ def test_init_command_writes_init_json(tmp_path, capsys):
     assert data["format"] == "zoopraxis-init/1" and [a["frame"] for a in data["anchors"]] == \
         [0, 47]
     assert cli.main(args) == 2                                # no overwrite without --force
-    assert "already exists" in capsys.readouterr().err
+    assert "file exists" in capsys.readouterr().err
 
 
 def test_init_command_one_view_with_and_without_the_pose_prior(tmp_path, capsys):
