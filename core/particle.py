@@ -501,7 +501,7 @@ class ParticleFilter:
                 coverage, _ = lik.coverage_from_hits(hits)
         return state, seg2world, lik.evaluate(images, seg2world, previous)
 
-    def measure(self, roots, angles):
+    def measure(self, roots, angles, caller="measure"):
         """The likelihood's full answer for given poses in the last frame :meth:`step`
         weighed (log-likelihood, inliers, silhouette cover, ...), not tempered.
 
@@ -509,13 +509,15 @@ class ParticleFilter:
         ----------
         roots : array, shape (K, 4, 4)
         angles : array, shape (K, n_dofs)
+        caller : str
+            The method named in the error when no frame has been weighed yet.
 
         Returns
         -------
         likelihood.LikelihoodResult
         """
         if self._frame < 1:
-            raise ZoopraxisError("ParticleFilter: measure() needs a frame weighed by step()")
+            raise ZoopraxisError(f"ParticleFilter: {caller}() needs a frame weighed by step()")
         seg2world = self.kinematics.seg2world(np.asarray(roots, float),
                                               np.asarray(angles, float))
         return self.likelihood.evaluate(self._images, seg2world)
@@ -533,11 +535,7 @@ class ParticleFilter:
         -------
         log_likelihood : array, shape (K,)
         """
-        if self._frame < 1:
-            raise ZoopraxisError("ParticleFilter: score() needs a frame weighed by step()")
-        seg2world = self.kinematics.seg2world(np.asarray(roots, float),
-                                              np.asarray(angles, float))
-        return self.likelihood.evaluate(self._images, seg2world).log_likelihood
+        return self.measure(roots, angles, caller="score").log_likelihood
 
     def recentre(self, pose, fraction=0.5, **init_options):
         """Draw a share of the particles again around a pose found by other means.
