@@ -20,6 +20,18 @@ def shared_data_dir():
     return path if path.is_dir() else None
 
 
+def slow_walk_take(n):
+    """``n`` frames of a slow synthetic walk (CMU 131_02 from frame 200) in 2 calibrated
+    320x240 views, and its true joints; skips the test without the shared data."""
+    from zoopraxis.core import synth
+
+    data = shared_data_dir()
+    if data is None:
+        pytest.skip("shared data (../shared/data) is not beside this clone")
+    return synth.take_from_bvh(data / "cmu_mocap" / "131_02.bvh", frames=slice(200, 200 + n),
+                               views=2, image_size=(320, 240), noise=1.0, clutter=4)
+
+
 @pytest.fixture
 def shared_data():
     path = shared_data_dir()

@@ -24,14 +24,9 @@ def limb_errors(body, truth):
 
 @pytest.fixture(scope="module")
 def take():
-    from tests.conftest import shared_data_dir
+    from tests.conftest import slow_walk_take
 
-    data = shared_data_dir()
-    if data is None:
-        pytest.skip("shared data (../shared/data) is not beside this clone")
-    scene, joints = synth.take_from_bvh(data / "cmu_mocap" / "131_02.bvh",
-                                        frames=slice(200, 200 + N), views=2,
-                                        image_size=(320, 240), noise=1.0, clutter=4)
+    scene, joints = slow_walk_take(N)
     truth, _, _ = fit3d.fit_sequence(joints)
     wrong = truth.with_dims({n: WRONG * truth.dims[n] for n in FT.LENGTH_DIMS})
     cams = {c.name: c for c in scene.cameras}

@@ -16,15 +16,10 @@ N = 8
 
 @pytest.fixture(scope="module")
 def take():
-    from tests.conftest import shared_data_dir
+    from tests.conftest import slow_walk_take
 
-    data = shared_data_dir()
-    if data is None:
-        pytest.skip("shared data (../shared/data) is not beside this clone")
     # a slow walk: frame-to-frame joint motion of about 2 cm
-    scene, joints = synth.take_from_bvh(data / "cmu_mocap" / "131_02.bvh",
-                                        frames=slice(200, 200 + N), views=2,
-                                        image_size=(320, 240), noise=1.0, clutter=4)
+    scene, joints = slow_walk_take(N)
     body, poses, _ = fit3d.fit_sequence(joints)
     return scene, joints, body, poses
 
