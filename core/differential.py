@@ -437,11 +437,13 @@ class DifferentialTracker:
             return state, report
         labels = [r.label for r in report.renders]
         known = [im.known for im in images_t1]
+        unexplained = None      # per view, at ``state``: from the search when it ran
         # One view's silhouette leaves a limb's depth free (and scaled-orthographic views
         # fit perspective plates only roughly): the search needs two calibrated views.
         if (self.settings.limb_search and self.calibrated
                 and sum(d is not None for d in sdfs) >= 2):
             angles, moved = self.search.search(state, sdfs, labels, known)
+            unexplained = self.search.last_unexplained
             if moved:
                 proposal = state.copy()
                 proposal.angles = angles
@@ -455,11 +457,14 @@ class DifferentialTracker:
                     report2.recovered = [name for name, _ in moved]
                     state, report = state2, report2
                     labels = [r.label for r in report.renders]
+                    unexplained = None
         report.limb_fit = self.search.fit(state, sdfs, labels)
+        if unexplained is None:
+            unexplained = [None if d is None else unexplained_foreground(d < 0, lab, k)
+                           for d, lab, k in zip(sdfs, labels, known)]
         report.unexplained = np.array([
-            np.nan if d is None else
-            unexplained_foreground(d < 0, lab, k).sum() / max(int((lab >= 0).sum()), 1)
-            for d, lab, k in zip(sdfs, labels, known)])
+            np.nan if u is None else u.sum() / max(int((lab >= 0).sum()), 1)
+            for u, lab in zip(unexplained, labels)])
         return state, report
 
     def _step(self, state_t, images_t, images_t1, previous, renders_t, start, flow=None):

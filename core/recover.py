@@ -119,6 +119,12 @@ def unexplained_foreground(foreground, labels, known=None, min_px=UNEXPLAINED_MI
     return cv2.morphologyEx(rest, cv2.MORPH_OPEN, kernel) > 0
 
 
+def _rest_of_body(labels, group):
+    """Per view, the pixels the model covers with segments other than the limb's."""
+    return [None if lab is None else (lab >= 0) & ~np.isin(lab, group.segments)
+            for lab in labels]
+
+
 class LimbSearch:
     """Silhouette search over each limb's joint angles (see the module notes).
 
@@ -228,9 +234,9 @@ class LimbSearch:
         unexplained = [None if d is None or lab is None else
                        unexplained_foreground(d < 0, lab, k)
                        for d, lab, k in zip(sdfs, rest_labels, known)]
+        self.last_unexplained = unexplained     # of the pose searched from, for the caller
         for group in self.groups:
-            rest = [None if lab is None else (lab >= 0) & ~np.isin(lab, group.segments)
-                    for lab in rest_labels]
+            rest = _rest_of_body(rest_labels, group)
             best, gain = self._search_group(state.roots, angles, group, state.cameras, sdfs,
                                             rest, unexplained)
             if gain > self.margin:
@@ -272,8 +278,7 @@ class LimbSearch:
         """
         out = {}
         for group in self.groups:
-            rest = [None if lab is None else (lab >= 0) & ~np.isin(lab, group.segments)
-                    for lab in labels]
+            rest = _rest_of_body(labels, group)
             out[group.name] = float(self.score(state.roots, state.angles[None], group.segments,
                                                state.cameras, sdfs, rest)[0])
         return out
