@@ -49,12 +49,12 @@ from .body import Pose
 from .differential import DifferentialTracker, Settings, State, StepReport, prepare_images
 from .errors import ZoopraxisError
 from .image_motion import accumulate
-from .markers import check_markers
 from .motion_prior import SmoothMotionPrior, WalkingPrior, smooth_sigmas
 from .particle import ParticleFilter
 from .plates import to_gray_float
 from .track import (Cancelled, FrameSource, Initial, blend_report, blend_states, blend_weights,
-                    make_result, plan_passes, silhouette_measures, take_backgrounds)
+                    check_take, make_result, plan_passes, silhouette_measures,
+                    take_backgrounds)
 
 TRACKERS = ("particle", "hybrid")
 PRIORS = ("smooth", "walk")
@@ -279,8 +279,6 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
         (zero at the anchors' given poses); ``extra`` holds the filter's own per-frame status
         and effective sample size.
     """
-    from .plates import check_same_length
-
     if tracker not in TRACKERS:
         raise ZoopraxisError(f"unknown tracker '{tracker}' (expected one of "
                              f"{', '.join(TRACKERS)})")
@@ -300,35 +298,15 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
         layers = 2 if tracker == "particle" else 0
     if silhouette is None:
         silhouette = SILHOUETTE if prior == "smooth" else 0.0
-    views = list(plates)
-    offsets = dict(offsets or {})
-    n_total = check_same_length(plates, offsets)
-    frames = range(0, n_total) if frames is None else frames
-    if len(frames) < 1:
-        raise ZoopraxisError("the frame range is empty")
-    if frames.start < 0 or frames.stop > n_total:
-        raise ZoopraxisError(f"frames {frames.start}:{frames.stop} are outside the take "
-                             f"(0:{n_total})")
     if cameras is None:
         raise ZoopraxisError(f"the {tracker} tracker needs a calibration (its likelihood "
                              "projects through perspective cameras); for uncalibrated plates "
                              "use --tracker differential")
-    missing = [v for v in views if v not in cameras]
-    if missing:
-        raise ZoopraxisError(f"the calibration has no camera for view '{missing[0]}'")
+    views, offsets, frames, inside = check_take(plates, anchors, cameras, frames, offsets)
     for v in views:
-        if tuple(cameras[v].image_size) != tuple(plates[v].image_size):
-            raise ZoopraxisError(
-                f"view '{v}': calibration image size {tuple(cameras[v].image_size)} differs "
-                f"from the plate's {tuple(plates[v].image_size)}")
         if not hasattr(cameras[v], "K"):
             raise ZoopraxisError(f"view '{v}': the {tracker} tracker needs a perspective "
                                  "camera")
-    check_markers(anchors, views, n_total)
-    inside = [a for a in anchors if frames.start <= a.frame < frames.stop]
-    if not inside:
-        raise ZoopraxisError(f"no marker anchor inside frames {frames.start}:{frames.stop} "
-                             f"(anchors at {', '.join(str(a.frame) for a in anchors)})")
     log = log or (lambda msg: None)
     settings = settings or Settings()
     if "limb_search" in {f.name for f in dataclasses.fields(settings)}:

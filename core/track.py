@@ -311,6 +311,47 @@ class Cancelled(Exception):
     """Raised inside the tracking loop when the caller's cancel() says so."""
 
 
+def check_take(plates, anchors, cameras, frames, offsets):
+    """Check a take's inputs, in one line each: plates of one length, a frame range inside
+    them, cameras for every view at the plates' size (when given), markers on known views and
+    at least one anchor inside the range.
+
+    Returns
+    -------
+    views : list of str
+    offsets : dict of str to int
+    frames : range
+    inside : list of markers.Anchor
+        The anchors inside ``frames``.
+    """
+    from .plates import check_same_length
+
+    views = list(plates)
+    offsets = dict(offsets or {})
+    n_total = check_same_length(plates, offsets)
+    frames = range(0, n_total) if frames is None else frames
+    if len(frames) < 1:
+        raise ZoopraxisError("the frame range is empty")
+    if frames.start < 0 or frames.stop > n_total:
+        raise ZoopraxisError(f"frames {frames.start}:{frames.stop} are outside the take "
+                             f"(0:{n_total})")
+    if cameras is not None:
+        missing = [v for v in views if v not in cameras]
+        if missing:
+            raise ZoopraxisError(f"the calibration has no camera for view '{missing[0]}'")
+        for v in views:
+            if tuple(cameras[v].image_size) != tuple(plates[v].image_size):
+                raise ZoopraxisError(
+                    f"view '{v}': calibration image size {tuple(cameras[v].image_size)} differs "
+                    f"from the plate's {tuple(plates[v].image_size)}")
+    check_markers(anchors, views, n_total)
+    inside = [a for a in anchors if frames.start <= a.frame < frames.stop]
+    if not inside:
+        raise ZoopraxisError(f"no marker anchor inside frames {frames.start}:{frames.stop} "
+                             f"(anchors at {', '.join(str(a.frame) for a in anchors)})")
+    return views, offsets, frames, inside
+
+
 def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template="full",
           settings=None, init=None, max_size=960, progress=None, cancel=None, log=None):
     """Track a take with the differential tracker.
@@ -336,32 +377,8 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
     -------
     TrackResult
     """
-    from .plates import check_same_length
-
-    views = list(plates)
-    offsets = dict(offsets or {})
-    n_total = check_same_length(plates, offsets)
-    frames = range(0, n_total) if frames is None else frames
-    if len(frames) < 1:
-        raise ZoopraxisError("the frame range is empty")
-    if frames.start < 0 or frames.stop > n_total:
-        raise ZoopraxisError(f"frames {frames.start}:{frames.stop} are outside the take "
-                             f"(0:{n_total})")
+    views, offsets, frames, inside = check_take(plates, anchors, cameras, frames, offsets)
     calibrated = cameras is not None
-    if calibrated:
-        missing = [v for v in views if v not in cameras]
-        if missing:
-            raise ZoopraxisError(f"the calibration has no camera for view '{missing[0]}'")
-        for v in views:
-            if tuple(cameras[v].image_size) != tuple(plates[v].image_size):
-                raise ZoopraxisError(
-                    f"view '{v}': calibration image size {tuple(cameras[v].image_size)} differs "
-                    f"from the plate's {tuple(plates[v].image_size)}")
-    check_markers(anchors, views, n_total)
-    inside = [a for a in anchors if frames.start <= a.frame < frames.stop]
-    if not inside:
-        raise ZoopraxisError(f"no marker anchor inside frames {frames.start}:{frames.stop} "
-                             f"(anchors at {', '.join(str(a.frame) for a in anchors)})")
     log = log or (lambda msg: None)
     settings = settings or Settings()
 
