@@ -42,7 +42,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from zoopraxis.core import motion_prior, particle, render, se3, synth
+from zoopraxis.core import motion_prior, particle, se3, synth
 from zoopraxis.core.background import estimate_background
 from zoopraxis.core.body import Pose, make_body
 from zoopraxis.core.camera import PinholeCamera, look_at
@@ -122,19 +122,8 @@ def arm_take(frames=40, twist=0.6, size=(320, 240), seed=2345):
     light = np.array([0.3, -0.6, 0.75]) / np.linalg.norm([0.3, -0.6, 0.75])
     images = []
     for k in range(frames):
-        seg2world = shown.seg2world(roots[k], angles[k])
-        res = render.render(camera, seg2world, prims, want=("point", "normal"))
-        image = background.copy()
-        fg = res.label >= 0
-        label = res.label[fg].astype(int)
-        world2seg = np.linalg.inv(seg2world)[label]
-        local = np.einsum("nij,nj->ni", world2seg[:, :3, :3], res.point[fg]) + world2seg[:, :3, 3]
-        grey = np.zeros(len(label))
-        for s in np.unique(label):
-            grey[label == s] = textures[s](local[label == s])
-        image[fg] = grey * (0.45 + 0.55 * np.clip(res.normal[fg] @ light, 0, 1))
-        image += rng.normal(0.0, 2.0, image.shape)
-        images.append(np.clip(image, 0, 255).astype(np.uint8))
+        images.append(synth.textured_grey(camera, shown.seg2world(roots[k], angles[k]), prims,
+                                          textures, background, light, rng))
     return body, camera, images, roots, angles
 
 

@@ -360,6 +360,43 @@ def make_scene(joints, joint_frames, *, views=3, image_size=(480, 360), build="a
 
 # -- takes on disk -----------------------------------------------------------------------------
 
+def textured_grey(camera, seg2world, prims, textures, background, light, rng, noise=2.0):
+    """A grey image of primitives wearing per-segment surface textures, Lambert-shaded.
+
+    Parameters
+    ----------
+    camera : camera
+    seg2world : array, shape (S, 4, 4)
+    prims : render.Primitives
+    textures : sequence of callable
+        Per segment: grey level (0-255) of points given in the segment's coordinates.
+    background : array (H, W) float
+    light : array, shape (3,)
+        Unit direction towards the light.
+    rng : numpy.random.Generator
+        Draws the sensor noise.
+    noise : float
+        Standard deviation of the sensor noise, grey levels.
+
+    Returns
+    -------
+    array (H, W) uint8
+    """
+    res = render.render(camera, seg2world, prims, want=("point", "normal"))
+    background = np.asarray(background)
+    image = background.astype(np.result_type(background.dtype, np.float32))
+    fg = res.label >= 0
+    label = res.label[fg].astype(int)
+    inv = np.linalg.inv(seg2world)[label]
+    local = np.einsum("nij,nj->ni", inv[:, :3, :3], res.point[fg]) + inv[:, :3, 3]
+    grey = np.zeros(len(label))
+    for s in np.unique(label):
+        grey[label == s] = textures[s](local[label == s])
+    image[fg] = grey * (0.45 + 0.55 * np.clip(res.normal[fg] @ light, 0, 1))
+    image += rng.normal(0.0, noise, image.shape)
+    return np.clip(image, 0, 255).astype(np.uint8)
+
+
 def project_joints(cameras, joints):
     """Ground-truth 2D joints per view: dict view -> array (F, 17, 2)."""
     return {cam.name: cam.project(joints) for cam in cameras}

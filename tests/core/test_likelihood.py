@@ -5,7 +5,7 @@ import cv2
 import numpy as np
 import pytest
 
-from zoopraxis.core import likelihood, render, se3
+from zoopraxis.core import likelihood, render, se3, synth
 from zoopraxis.core.body import make_body
 from zoopraxis.core.camera import PinholeCamera, look_at
 from zoopraxis.core.errors import ZoopraxisError
@@ -62,21 +62,8 @@ def arm_take(frames=30, twist=0.6, size=(240, 180), azimuths=(-np.pi / 2 + 0.7,)
     images = []
     for k in range(frames):
         seg2world = shown.seg2world(roots[k], angles[k])
-        views = []
-        for cam, background in zip(cameras, backgrounds):
-            res = render.render(cam, seg2world, prims, want=("point", "normal"))
-            image = background.copy()
-            fg = res.label >= 0
-            label = res.label[fg].astype(int)
-            inv = np.linalg.inv(seg2world)[label]
-            local = np.einsum("nij,nj->ni", inv[:, :3, :3], res.point[fg]) + inv[:, :3, 3]
-            grey = np.zeros(len(label))
-            for s in np.unique(label):
-                grey[label == s] = textures[s](local[label == s])
-            image[fg] = grey * (0.45 + 0.55 * np.clip(res.normal[fg] @ light, 0, 1))
-            image += rng.normal(0.0, 2.0, image.shape)
-            views.append(np.clip(image, 0, 255).astype(np.uint8))
-        images.append(views)
+        images.append([synth.textured_grey(cam, seg2world, prims, textures, background, light,
+                                           rng) for cam, background in zip(cameras, backgrounds)])
     return body, cameras, images, roots, angles
 
 
