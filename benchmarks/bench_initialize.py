@@ -26,16 +26,13 @@ import numpy as np  # noqa: E402
 from zoopraxis.core import body as bm  # noqa: E402
 from zoopraxis.core import calibrate as cal  # noqa: E402
 from zoopraxis.core import initialize as init  # noqa: E402
-from zoopraxis.core import se3  # noqa: E402
+from zoopraxis.core import se3, synth  # noqa: E402
 from zoopraxis.core.camera import PinholeCamera, look_at, ring_of_cameras  # noqa: E402
 from zoopraxis.core.joints import JOINT_INDEX, STANDARD_JOINTS  # noqa: E402
 from zoopraxis.core.markers import Anchor  # noqa: E402
 
 NOISE_PX = 2.0
 SEGMENTS = ("thigh", "shank", "upper_arm", "forearm", "torso")
-SPREAD_DEG = {"lumbar": 10, "thorax": 10, "neck": 20, "shoulder_flex": 45, "shoulder_abd": 25,
-              "shoulder_rot": 30, "elbow_flex": 70, "hip_flex": 40, "hip_abd": 15,
-              "hip_rot": 15, "knee_flex": 70, "ankle_flex": 20, "ankle_inv": 10}
 # Plates: (image size, pixels per metre at the subject, camera distance in metres).
 VGA_4M = ((640, 480), 200.0, 4.0)
 HD_4M = ((1280, 720), 300.0, 4.0)
@@ -43,27 +40,6 @@ FHD_10M = ((1920, 1080), 430.0, 10.0)
 FHD_100M = ((1920, 1080), 430.0, 100.0)      # telephoto: scaled orthographic in effect
 VGA_10M = ((640, 480), 200.0, 10.0)
 CMU = Path(__file__).resolve().parents[2] / "shared" / "data" / "cmu_mocap"
-
-
-def plausible_pose(body, rng):
-    spread = np.zeros(body.n_dofs)
-    for k, name in enumerate(body.dof_names):
-        bare = name[2:] if name[:2] in ("l_", "r_") else name
-        spread[k] = np.radians(next((d for key, d in SPREAD_DEG.items()
-                                     if bare.startswith(key)), 0.0))
-    angles = np.clip(rng.uniform(-spread, spread), body.lower, body.upper)
-    one_way = [k for k, n in enumerate(body.dof_names) if n.endswith(("knee_flex", "elbow_flex"))]
-    angles[one_way] = rng.uniform(0.0, spread[one_way])
-    root = se3.transform(se3.exp_so3([0.0, 0.0, rng.uniform(-np.pi, np.pi)]),
-                         [rng.uniform(-0.4, 0.4), rng.uniform(-0.4, 0.4), 0.0])
-    root[2, 3] = 0.05 - body.joints(bm.Pose(root, angles))[:, 2].min()
-    return bm.Pose(root, angles)
-
-
-def subject(rng):
-    size = rng.uniform(0.9, 1.1)
-    return bm.make_body("full", {n: bm.DEFAULT_DIMS[n] * size * rng.uniform(0.95, 1.05)
-                                 for n in bm.LENGTH_DIMS})
 
 
 def ring(n, rng, plate, target=(0.0, 0.0, 1.0)):
@@ -121,8 +97,8 @@ def body_model_cases(table, rng, n):
     for label, plate in (("640x480 @4m", VGA_4M), ("1280x720 @4m", HD_4M)):
         err, pa, seg, secs = [], [], [], []
         for _ in range(n):
-            body = subject(rng)
-            X = body.joints(plausible_pose(body, rng))
+            body = synth.random_subject(rng)
+            X = body.joints(synth.everyday_pose(body, rng))
             cams = ring(3, rng, plate)
             t = time.perf_counter()
             result = init.initialize([Anchor(0, clicks(cams, X, rng))], {c.name: c for c in cams})
@@ -138,9 +114,9 @@ def body_model_cases(table, rng, n):
     # the joint problem over three anchors
     seg, err = [], []
     for _ in range(max(2, n // 2)):
-        body = subject(rng)
+        body = synth.random_subject(rng)
         cams = ring(3, rng, VGA_4M)
-        poses = [plausible_pose(body, rng) for _ in range(3)]
+        poses = [synth.everyday_pose(body, rng) for _ in range(3)]
         anchors = [Anchor(k, clicks(cams, body.joints(p), rng)) for k, p in enumerate(poses)]
         result = init.initialize(anchors, {c.name: c for c in cams})
         seg.append(100 * segment_error(result.body, body.dims))
@@ -154,8 +130,8 @@ def body_model_cases(table, rng, n):
                                 (1, "640x480 @10m", VGA_10M), (3, "640x480 @10m", VGA_10M)):
         pa, pa_off, seg, amb, secs, nats = [], [], [], [], [], []
         for _ in range(n):
-            body = subject(rng)
-            pose = plausible_pose(body, rng)
+            body = synth.random_subject(rng)
+            pose = synth.everyday_pose(body, rng)
             X = body.joints(pose)
             cams = ring(views, rng, plate)
             anchor = [Anchor(0, clicks(cams, X, rng))]
@@ -229,8 +205,8 @@ def cmu_cases(table, rng, n):
 def swap_cases(table, rng, n):
     found, clean_false = [], []
     for _ in range(n):
-        body = subject(rng)
-        X = body.joints(plausible_pose(body, rng))
+        body = synth.random_subject(rng)
+        X = body.joints(synth.everyday_pose(body, rng))
         cams = ring(3, rng, VGA_4M)
         views = clicks(cams, X, rng)
         result = init.initialize([Anchor(0, views)], {c.name: c for c in cams})
@@ -248,9 +224,9 @@ def swap_cases(table, rng, n):
 
 
 def refine_cases(table, rng, frames):
-    truth = subject(rng)
+    truth = synth.random_subject(rng)
     cams = ring(3, rng, VGA_4M)
-    poses = {f: plausible_pose(truth, rng) for f in range(frames)}
+    poses = {f: synth.everyday_pose(truth, rng) for f in range(frames)}
     obs = {f: {c.name: c.project(truth.joints(p)) + rng.normal(0, NOISE_PX, (17, 2))
                for c in cams} for f, p in poses.items()}
     start = {f: bm.Pose(se3.exp_se3(rng.normal(0, 0.02, 6)) @ p.root,

@@ -397,6 +397,44 @@ def textured_grey(camera, seg2world, prims, textures, background, light, rng, no
     return np.clip(image, 0, 255).astype(np.uint8)
 
 
+# Everyday poses for synthetic subjects: half-range (degrees) per DOF without side prefix;
+# knees and elbows bend one way only.
+EVERYDAY_SPREAD_DEG = {"lumbar": 10, "thorax": 10, "neck": 20, "shoulder_flex": 45,
+                       "shoulder_abd": 25, "shoulder_rot": 30, "elbow_flex": 70, "hip_flex": 40,
+                       "hip_abd": 15, "hip_rot": 15, "knee_flex": 70, "ankle_flex": 20,
+                       "ankle_inv": 10}
+
+
+def everyday_pose(body, rng):
+    """A random everyday pose of ``body``: upright, feet just above the floor, turned any way,
+    within ``x`` metres of the origin (|x|, |y| <= 0.4)."""
+    from . import se3
+    from .body import Pose
+
+    spread = np.zeros(body.n_dofs)
+    for k, name in enumerate(body.dof_names):
+        bare = name[2:] if name[:2] in ("l_", "r_") else name
+        spread[k] = np.radians(next((d for key, d in EVERYDAY_SPREAD_DEG.items()
+                                     if bare.startswith(key)), 0.0))
+    angles = np.clip(rng.uniform(-spread, spread), body.lower, body.upper)
+    one_way = [k for k, n in enumerate(body.dof_names) if n.endswith(("knee_flex", "elbow_flex"))]
+    angles[one_way] = rng.uniform(0.0, spread[one_way])
+    root = se3.transform(se3.exp_so3([0.0, 0.0, rng.uniform(-np.pi, np.pi)]),
+                         [rng.uniform(-0.4, 0.4), rng.uniform(-0.4, 0.4), 0.0])
+    root[2, 3] = 0.05 - body.joints(Pose(root, angles))[:, 2].min()
+    return Pose(root, angles)
+
+
+def random_subject(rng, template="full"):
+    """A body of random size (0.9-1.1) whose lengths differ from the template's proportions
+    by up to 5 %."""
+    from .body import DEFAULT_DIMS, LENGTH_DIMS, make_body
+
+    size = rng.uniform(0.9, 1.1)
+    return make_body(template, {n: DEFAULT_DIMS[n] * size * rng.uniform(0.95, 1.05)
+                                for n in LENGTH_DIMS})
+
+
 def project_joints(cameras, joints):
     """Ground-truth 2D joints per view: dict view -> array (F, 17, 2)."""
     return {cam.name: cam.project(joints) for cam in cameras}

@@ -8,42 +8,13 @@ import pytest
 from zoopraxis import cli
 from zoopraxis.core import body as bm
 from zoopraxis.core import initialize as init
-from zoopraxis.core import se3
+from zoopraxis.core import se3, synth
 from zoopraxis.core.camera import ScaledOrthoCamera, ring_of_cameras
 from zoopraxis.core.errors import ZoopraxisError
 from zoopraxis.core.joints import JOINT_INDEX, STANDARD_JOINTS
 from zoopraxis.core.markers import Anchor
 
 NOISE_PX = 2.0
-# Everyday poses for the synthetic subjects: half-range (degrees) per DOF without side prefix;
-# knees and elbows bend one way only.
-SPREAD_DEG = {"lumbar": 10, "thorax": 10, "neck": 20, "shoulder_flex": 45, "shoulder_abd": 25,
-              "shoulder_rot": 30, "elbow_flex": 70, "hip_flex": 40, "hip_abd": 15,
-              "hip_rot": 15, "knee_flex": 70, "ankle_flex": 20, "ankle_inv": 10}
-
-
-def plausible_pose(body, rng):
-    """A random everyday pose, upright, feet just above the floor, turned any way."""
-    spread = np.zeros(body.n_dofs)
-    for k, name in enumerate(body.dof_names):
-        bare = name[2:] if name[:2] in ("l_", "r_") else name
-        spread[k] = np.radians(next((d for key, d in SPREAD_DEG.items()
-                                     if bare.startswith(key)), 0.0))
-    angles = np.clip(rng.uniform(-spread, spread), body.lower, body.upper)
-    one_way = [k for k, n in enumerate(body.dof_names) if n.endswith(("knee_flex", "elbow_flex"))]
-    angles[one_way] = rng.uniform(0.0, spread[one_way])
-    root = se3.transform(se3.exp_so3([0.0, 0.0, rng.uniform(-np.pi, np.pi)]),
-                         [rng.uniform(-0.4, 0.4), rng.uniform(-0.4, 0.4), 0.0])
-    root[2, 3] = 0.05 - body.joints(bm.Pose(root, angles))[:, 2].min()
-    return bm.Pose(root, angles)
-
-
-def subject(rng, template="full"):
-    """A body of random size (0.9-1.1) whose lengths differ from the template's proportions
-    by up to 5 %."""
-    size = rng.uniform(0.9, 1.1)
-    return bm.make_body(template, {n: bm.DEFAULT_DIMS[n] * size * rng.uniform(0.95, 1.05)
-                                   for n in bm.LENGTH_DIMS})
 
 
 def clicks(cameras, X, rng, noise=NOISE_PX):
@@ -95,10 +66,10 @@ def _finite_difference(problem, x, h=1e-6):
 
 @pytest.mark.parametrize("calibrated", [True, False])
 def test_problem_jacobian_against_finite_differences(calibrated, rng):
-    body = subject(rng)
+    body = synth.random_subject(rng)
     kin = init._kinematics("full")
     cams = ring(2, rng)
-    poses = [plausible_pose(body, rng) for _ in range(2)]
+    poses = [synth.everyday_pose(body, rng) for _ in range(2)]
     obs = np.stack([[c.project(body.joints(p)) for c in cams] for p in poses])
     obs[0, 1, 3] = np.nan                                      # an unclicked joint
     if calibrated:
@@ -149,8 +120,8 @@ def test_calibrated_three_views_recover_pose_and_dims(rng):
     5 % from one anchor."""
     errors = []
     for _ in range(2):
-        body = subject(rng)
-        pose = plausible_pose(body, rng)
+        body = synth.random_subject(rng)
+        pose = synth.everyday_pose(body, rng)
         X = body.joints(pose)
         cams = ring(3, rng, size=(1280, 720), ppm=300.0)
         result = init.initialize([Anchor(0, clicks(cams, X, rng))], {c.name: c for c in cams})
@@ -164,9 +135,9 @@ def test_calibrated_three_views_recover_pose_and_dims(rng):
 
 def test_anchor_frames_share_one_set_of_dims(rng):
     """The joint problem over several anchors: one set of lengths, limbs within 3 %."""
-    body = subject(rng)
+    body = synth.random_subject(rng)
     cams = ring(3, rng)
-    poses = [plausible_pose(body, rng) for _ in range(3)]
+    poses = [synth.everyday_pose(body, rng) for _ in range(3)]
     anchors = [Anchor(10 * k, clicks(cams, body.joints(p), rng)) for k, p in enumerate(poses)]
     result = init.initialize(anchors, {c.name: c for c in cams})
     assert sorted(result.poses) == [0, 10, 20]
@@ -188,8 +159,8 @@ def test_uncalibrated_one_view_procrustes_error(rng):
     prior is left out (the benchmark measures both)."""
     errors = []
     for _ in range(3):
-        body = subject(rng)
-        pose = plausible_pose(body, rng)
+        body = synth.random_subject(rng)
+        pose = synth.everyday_pose(body, rng)
         X = body.joints(pose)
         cams = ring(1, rng, distance=100.0, size=(1920, 1080), ppm=430.0)
         result = init.initialize([Anchor(0, clicks(cams, X, rng))], {"cam0": cams[0]},
@@ -201,9 +172,9 @@ def test_uncalibrated_one_view_procrustes_error(rng):
 
 
 def test_uncalibrated_three_views_one_camera_per_view_and_anchor(rng):
-    body = subject(rng)
+    body = synth.random_subject(rng)
     cams = ring(3, rng, distance=10.0)              # far enough to look scaled orthographic
-    poses = [plausible_pose(body, rng) for _ in range(2)]
+    poses = [synth.everyday_pose(body, rng) for _ in range(2)]
     anchors = [Anchor(k, clicks(cams, body.joints(p), rng)) for k, p in enumerate(poses)]
     result = init.initialize(anchors, {c.name: c for c in cams}, calibrated=False)
     assert set(result.view_cameras) == {0, 1}
@@ -229,8 +200,8 @@ def test_cmu_sample_take_is_fitted_approximately():
 
 
 def test_fitted_angles_stay_within_limits(rng):
-    body = subject(rng)
-    pose = plausible_pose(body, rng)
+    body = synth.random_subject(rng)
+    pose = synth.everyday_pose(body, rng)
     pose.angles[body.dof_index("l_knee_flex")] = 0.0            # on its limit
     pose.angles[body.dof_index("r_elbow_flex")] = body.upper[body.dof_index("r_elbow_flex")]
     cams = ring(3, rng)
@@ -242,9 +213,9 @@ def test_fitted_angles_stay_within_limits(rng):
 
 
 def test_fixed_dims_are_kept(rng):
-    body = subject(rng)
+    body = synth.random_subject(rng)
     cams = ring(3, rng)
-    X = body.joints(plausible_pose(body, rng))
+    X = body.joints(synth.everyday_pose(body, rng))
     result = init.initialize([Anchor(0, clicks(cams, X, rng))], {c.name: c for c in cams},
                              dims=body.dims, fit_dims=False)
     assert all(np.isclose(result.body.dims[n], body.dims[n]) for n in bm.LENGTH_DIMS)
@@ -254,8 +225,8 @@ def test_fixed_dims_are_kept(rng):
 # -- initialization: bad clicks and ambiguity ------------------------------------------------
 
 def test_swapped_knees_in_one_view_are_detected_and_named(rng):
-    body = subject(rng)
-    pose = plausible_pose(body, rng)
+    body = synth.random_subject(rng)
+    pose = synth.everyday_pose(body, rng)
     X = body.joints(pose)
     cams = ring(3, rng)
     views = clicks(cams, X, rng)
@@ -271,8 +242,8 @@ def test_swapped_knees_in_one_view_are_detected_and_named(rng):
 
 
 def test_outlying_click_is_named_and_does_not_drag_the_fit(rng):
-    body = subject(rng)
-    X = body.joints(plausible_pose(body, rng))
+    body = synth.random_subject(rng)
+    X = body.joints(synth.everyday_pose(body, rng))
     cams = ring(3, rng)
     views = clicks(cams, X, rng)
     u, v = views["cam2"]["r_wrist"]
@@ -395,9 +366,9 @@ def test_bad_input_names_what_is_wrong(rng):
 
 def test_refine_dims_recovers_true_dims_from_a_noisy_sequence(rng):
     """Tracked 2D joints of 16 frames in 3 views, 2 px noise; poses and dims start off."""
-    truth = subject(rng)
+    truth = synth.random_subject(rng)
     cams = ring(3, rng)
-    poses = {f: plausible_pose(truth, rng) for f in range(16)}
+    poses = {f: synth.everyday_pose(truth, rng) for f in range(16)}
     obs = {f: {c.name: c.project(truth.joints(p)) + rng.normal(0, NOISE_PX, (17, 2))
                for c in cams} for f, p in poses.items()}
     obs[5]["cam0"][JOINT_INDEX["head"]] = np.nan              # a joint the tracker lost
@@ -417,9 +388,9 @@ def test_refine_dims_recovers_true_dims_from_a_noisy_sequence(rng):
 def test_refine_dims_weights_silence_bad_observations(rng):
     """A tracker failure it knows about (weight 0) counts as unobserved; unweighted, the
     robust loss bounds its pull but it still pulls."""
-    truth = subject(rng)
+    truth = synth.random_subject(rng)
     cams = {c.name: c for c in ring(2, rng)}
-    poses = {f: plausible_pose(truth, rng) for f in range(4)}
+    poses = {f: synth.everyday_pose(truth, rng) for f in range(4)}
     obs = {f: {n: c.project(truth.joints(p)) + rng.normal(0, NOISE_PX, (17, 2))
                for n, c in cams.items()} for f, p in poses.items()}
     obs[2]["cam1"][JOINT_INDEX["l_ankle"]] = np.nan
@@ -443,9 +414,9 @@ def test_refine_dims_weights_silence_bad_observations(rng):
 def test_refine_dims_with_one_camera_per_frame_and_view(rng):
     """Bregler & Malik's uncalibrated mode: the scaled orthographic cameras of every frame are
     refined with the angles; the proportions come back (the size is the cameras' scale)."""
-    truth = subject(rng)
+    truth = synth.random_subject(rng)
     cams = ring(2, rng, distance=10.0)
-    poses = {f: plausible_pose(truth, rng) for f in range(6)}
+    poses = {f: synth.everyday_pose(truth, rng) for f in range(6)}
     cameras, obs = {}, {}
     for f, pose in poses.items():
         cameras[f] = {c.name: ScaledOrthoCamera(c.name, c.image_size, 200.0,
@@ -478,9 +449,9 @@ def test_refine_dims_bad_input(rng):
 # -- init.json and the command line ------------------------------------------------------------
 
 def test_init_json_round_trip(rng):
-    body = subject(rng)
+    body = synth.random_subject(rng)
     cams = ring(2, rng)
-    X = body.joints(plausible_pose(body, rng))
+    X = body.joints(synth.everyday_pose(body, rng))
     result = init.initialize([Anchor(4, clicks(cams, X, rng))], {c.name: c for c in cams})
     data = json.loads(json.dumps(result.to_json()))
     back = init.init_from_json(data)
