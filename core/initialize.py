@@ -26,6 +26,9 @@ two spine joints, takes its likely value). In a frame clicked in one view, every
 tried mirrored in depth, and the depth signs of the limbs' parts are chosen by the clicks
 together with a pose prior learned from motion capture (:class:`PosePrior`, a kernel density
 of joint angles per limb, ``core/data/pose_prior.npz`` from ``tools/learn_pose_prior.py``).
+The same prior, as a Gaussian mixture per limb (:meth:`PosePrior.mixture`), replaces the
+everyday-angle prior in the least-squares fit of such a frame, so that it also sets the depth
+of limbs nearly in the image plane, which the clicks leave almost free.
 Clicks that look swapped left for right and outlying clicks are named in warnings and not
 absorbed; a mirrored pose that fits (and is as likely) about as well is reported.
 
@@ -165,6 +168,11 @@ PRIOR_MARGIN = 6.0
 # Weight of the broad everyday-pose Gaussian mixed into the learned density.
 PRIOR_BROAD_WEIGHT = 0.2
 PRIOR_MIN_BANDWIDTH_DEG = 4.0
+# Weight of the learned prior's -log p in the fit of frames seen in one view, in click
+# variances per nat (1: the posterior of clicks with CLICK_SIGMA_PX noise).
+PRIOR_WEIGHT = 1.0
+# Gaussians per body part of the mixture that stands for the density in least squares.
+PRIOR_COMPONENTS = 8
 
 
 def mirror_angles(dof_names, angles):
@@ -195,6 +203,7 @@ class PosePrior:
     ``-log p(angles) = sum over parts of -log mean_i N(a_part; a_i,part, h^2)`` (up to a
     constant), with Gaussian kernels of width ``h`` per DOF, optionally mixed with a broad
     Gaussian (:meth:`with_broad`). Built by ``tools/learn_pose_prior.py`` from CMU captures.
+    Least squares use it as a Gaussian mixture (:meth:`mixture`).
 
     Parameters
     ----------
@@ -216,6 +225,8 @@ class PosePrior:
                                       if n.startswith(prefixes)])
                       for part, prefixes in PRIOR_PARTS.items()}
         self.broad = None
+        self._learned = {}      # the samples' mixture per part, shared by with_broad copies
+        self._mixture = None
 
     @classmethod
     def load(cls, path=None, exclude=()):
@@ -255,6 +266,7 @@ class PosePrior:
         """
         out = copy.copy(self)
         out.broad = (np.asarray(mean, float), np.asarray(sigma, float), float(weight))
+        out._mixture = None
         return out
 
     def part_costs(self, angles):
@@ -288,6 +300,68 @@ class PosePrior:
     def cost(self, angles):
         """``-log p(angles)`` (nats, up to a constant), shape (B,)."""
         return self.part_costs(angles).sum(axis=1)
+
+    def mixture(self):
+        """The density as a Gaussian mixture per part, for least squares (cached).
+
+        Each part's samples are summarised by PRIOR_COMPONENTS Gaussians (EM from k-means++
+        seeds, deterministic), their covariances at least the kernels' widths; the broad
+        Gaussian, if any, is one more component of its weight.
+
+        Returns
+        -------
+        parts : list of (dofs, means (K, k), whiten (K, k, k), costs (K,))
+            ``-log p(a) ~ min_k 0.5 |whiten_k (a - mean_k)|^2 + cost_k`` (nats).
+        """
+        if self._mixture is not None:
+            return self._mixture
+        out = []
+        for part, cols in self.parts.items():
+            if part not in self._learned:
+                self._learned[part] = _fit_mixture(self.samples[:, cols], PRIOR_COMPONENTS,
+                                                   self.bandwidth[cols] ** 2)
+            weights, means, covs = self._learned[part]
+            if self.broad is not None:
+                mean, sigma, w = self.broad
+                weights = np.append((1.0 - w) * weights, w)
+                means = np.vstack([means, mean[cols]])
+                covs = np.concatenate([covs, np.diag(sigma[cols] ** 2)[None]])
+            whiten = np.linalg.cholesky(np.linalg.inv(covs)).swapaxes(-1, -2)  # W^T W = C^-1
+            costs = -np.log(weights) + 0.5 * np.linalg.slogdet(covs)[1]
+            out.append((cols, means, whiten, costs))
+        self._mixture = out
+        return out
+
+
+def _fit_mixture(x, n_components, floor_var, iterations=60):
+    """Gaussian mixture of the rows of ``x`` (N, k) by EM from k-means++ seeds (fixed seed),
+    each covariance at least ``diag(floor_var)``. Returns weights (K,), means (K, k), covs
+    (K, k, k)."""
+    rng = np.random.default_rng(0)
+    N, k = x.shape
+    K = min(n_components, N)
+    means = [x[rng.integers(N)]]
+    for _ in range(1, K):
+        d2 = np.min(((x[:, None] - np.array(means)[None]) ** 2 / floor_var).sum(-1), axis=1)
+        means.append(x[rng.choice(N, p=d2 / d2.sum())] if d2.sum() > 0 else x[rng.integers(N)])
+    means = np.array(means)
+    spread = np.cov(x.T).reshape(k, k) if N > 1 else np.zeros((k, k))
+    covs = np.broadcast_to(spread / K + np.diag(floor_var), (K, k, k)).copy()
+    weights = np.full(K, 1.0 / K)
+    for _ in range(iterations):
+        d = x[:, None] - means[None]                                          # (N, K, k)
+        inv = np.linalg.inv(covs)
+        log_r = -0.5 * np.einsum("nki,kij,nkj->nk", d, inv, d) \
+            - 0.5 * np.linalg.slogdet(covs)[1] + np.log(weights)
+        log_r -= log_r.max(axis=1, keepdims=True)
+        r = np.exp(log_r)
+        r /= r.sum(axis=1, keepdims=True)
+        n = r.sum(axis=0) + 1e-9                                              # (K,)
+        weights = n / N
+        means = (r.T @ x) / n[:, None]
+        d = x[:, None] - means[None]
+        covs = np.einsum("nk,nki,nkj->kij", r, d, d) / n[:, None, None] + np.diag(floor_var)
+    return weights, means, covs
 
 
 _POSE_PRIORS = {}
@@ -458,7 +532,8 @@ class _Problem:
     """
 
     def __init__(self, kin, obs, weights, state, *, free_root, free_angles=True, free_cams=None,
-                 fit_dims=True, calibrated=True, loss_scale=LOSS_SCALE_PX, dims_range=DIMS_RANGE):
+                 fit_dims=True, calibrated=True, loss_scale=LOSS_SCALE_PX, dims_range=DIMS_RANGE,
+                 pose_prior=None, prior_frames=None):
         self.kin = kin
         self.obs = np.asarray(obs, dtype=float)                     # (F, V, 17, 2)
         F, V = self.obs.shape[:2]
@@ -473,6 +548,12 @@ class _Problem:
         self.loss_scale = loss_scale
         self.dims_range = dims_range
         self.calibrated = calibrated
+        # The learned pose prior replaces the everyday-pose Gaussian in these frames.
+        self.pose_prior = pose_prior if free_angles else None
+        self.prior_frames = np.zeros(F, bool) if self.pose_prior is None else \
+            np.ones(F, bool) if prior_frames is None else np.asarray(prior_frames, bool)
+        if not self.prior_frames.any():
+            self.pose_prior = None
         free_cams = np.zeros((F, V), bool) if free_cams is None else np.asarray(free_cams, bool)
         self.cam_index = np.full((F, V), -1)
         self.cam_index[free_cams] = np.arange(free_cams.sum())
@@ -674,13 +755,31 @@ class _Problem:
             row += 1
         if self.free_angles:
             n = self.kin.n_dofs
-            wa = np.tile(CLICK_SIGMA_PX / self.kin.prior_sigma, self.F)
+            wa = np.outer(~self.prior_frames, CLICK_SIGMA_PX / self.kin.prior_sigma).ravel()
             angles = self._split(x)[5]
             res.append(wa * (angles - self.kin.prior_mean).ravel())
             a0 = self.off_frame + (_ROOT_PARAMS if self.free_root else 0)
             cols_a = a0 + np.arange(self.F)[:, None] * self.frame_size + np.arange(n)
             block(row + np.arange(self.F * n), cols_a.ravel(), wa)
             row += self.F * n
+            if self.pose_prior is not None:
+                scale = np.sqrt(PRIOR_WEIGHT) * CLICK_SIGMA_PX
+                frames = np.flatnonzero(self.prior_frames)
+                for dofs, means, whiten, costs in self.pose_prior.mixture():
+                    # The likeliest component of each frame: its whitened distance (a linear
+                    # residual) and its cost over the best component's (a constant one), so
+                    # that 0.5 r^2 is PRIOR_WEIGHT click variances per nat.
+                    d = angles[frames][:, None, dofs] - means[None]              # (B, K, k)
+                    z = np.einsum("kij,bkj->bki", whiten, d)
+                    total = 0.5 * np.einsum("bki,bki->bk", z, z) + costs
+                    best = np.argmin(total, axis=1)
+                    B, k = len(frames), len(dofs)
+                    res.append(scale * z[np.arange(B), best].ravel())
+                    block(row + np.arange(B * k).reshape(B, k, 1),
+                          cols_a[frames][:, dofs][:, None, :], scale * whiten[best])
+                    row += B * k
+                    res.append(scale * np.sqrt(2.0 * (costs[best] - costs.min())))
+                    row += B
         r = np.concatenate([np.ravel(p) for p in res])
         rows, cols, vals = (np.concatenate(a) for a in (rows, cols, vals))
         if r.size * self.n_params <= _DENSE_LIMIT:
@@ -1146,10 +1245,11 @@ def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None,
     views : list of str, optional
         The views to use; default all views of ``cameras`` (calibrated) or with clicks.
     pose_prior : PosePrior, "default" or None
-        Chooses the depth sign of each limb in frames clicked in one view (the mirror
-        ambiguity): the shipped prior learned from motion capture (``"default"``, if there is
-        one for the template), a given one, or none (then the angle prior of everyday poses
-        alone decides).
+        In frames clicked in one view, chooses the depth sign of each limb (the mirror
+        ambiguity) and, uncalibrated, is the angle prior of the fit (weight PRIOR_WEIGHT):
+        the shipped prior learned from motion capture (``"default"``, if there is one for the
+        template), a given one, or none (then the angle prior of everyday poses alone
+        decides).
 
     Returns
     -------
@@ -1239,7 +1339,7 @@ class _Fit:
         self.warnings = warnings
         self.ambiguous = False
         self.swapped = []
-        self.prior = None       # PosePrior: chooses the depth sign of limbs in one view
+        self.prior = None       # PosePrior: the angle prior of frames seen in one view
 
     # Subclasses give start(f) -> _State of one frame (F = 1), options(state, f, fit_dims) ->
     # _Problem options, depth_direction(state, f) and mirrored(state, f) for frames seen in one
@@ -1820,7 +1920,11 @@ class _UncalibratedFit(_Fit):
 
     def options(self, state, f, fit_dims):
         free = np.array([[c is not None for c in row] for row in state.cameras])
-        return dict(free_root=False, free_cams=free, fit_dims=fit_dims, calibrated=False)
+        options = dict(free_root=False, free_cams=free, fit_dims=fit_dims, calibrated=False)
+        if self.prior is not None and PRIOR_WEIGHT > 0:
+            # Frames seen in one view: the learned prior decides what the clicks leave free.
+            options.update(pose_prior=self.prior, prior_frames=free.sum(axis=1) == 1)
+        return options
 
     def start(self, f):
         """Best single-view fit over body turns, then each other view's camera alone."""

@@ -14,7 +14,8 @@ This is how ``core/data/pose_prior.npz`` is built; run it again to rebuild it. S
 
 The prior is a kernel density over these angle vectors, per body part
 (``initialize.PosePrior``); initialization uses it to choose the depth sign of limbs that one
-uncalibrated view cannot see (Bregler & Malik §2.6).
+uncalibrated view cannot see (Bregler & Malik §2.6) and, summarised as a Gaussian mixture per
+body part when it is loaded, as the angle prior of the least-squares fit of such a frame.
 """
 
 import argparse
