@@ -29,8 +29,8 @@ from . import se3
 from .background import model_coverage, signed_distance, silhouette_iou
 from .body import Pose
 from .collision import body_proxies, penalty_system
-from .image_motion import (Accumulated, Term, accumulate, assemble, image_with_gradients,
-                           sample)
+from .image_motion import (Accumulated, Stack, Term, accumulate, accumulate_stacked, assemble,
+                           image_with_gradients, sample_fast)
 from .recover import LimbSearch, unexplained_foreground
 from .render import render
 
@@ -63,6 +63,8 @@ class Settings:
                                       # calibrated, two views or more)
     tolerance: float = 1e-5           # stop a level's iterations when no parameter moves more
                                       # (metres or radians)
+    contour_per_level: bool = True    # render the contour at every pyramid level (False:
+                                      # once per frame at the finest level, at the start pose)
 
 
 _POOL = None
@@ -175,6 +177,8 @@ class DifferentialTracker:
         self.proxies = body_proxies(body)
         self.anchor_terms = None
         self.search = LimbSearch(body)
+        self._scaled = {}
+        self._stack_cache = None
 
     # -- parameter layout ---------------------------------------------------------------------
 
@@ -234,7 +238,19 @@ class DifferentialTracker:
     # -- terms ----------------------------------------------------------------------------------
 
     def _camera_at(self, camera, level):
-        return camera if level == 0 else camera.scaled(0.5 ** level)
+        """The camera of a pyramid level; kept per camera object, so the renderer's ray grids
+        (cached per camera) are built once per take, not at every iteration."""
+        if level == 0:
+            return camera
+        key = (id(camera), level)
+        hit = self._scaled.get(key)
+        if hit is not None and hit[0] is camera:
+            return hit[1]
+        if len(self._scaled) > 64:          # scaled-orthographic views change every frame
+            self._scaled.clear()
+        scaled = camera.scaled(0.5 ** level)
+        self._scaled[key] = (camera, scaled)
+        return scaled
 
     def template_terms(self, state, images_t, renders):
         """Image-motion terms from the rendered model at frame t, per view and level.
@@ -306,6 +322,17 @@ class DifferentialTracker:
 
         return self.map_views(one, len(state.cameras))
 
+    def coarser_contour(self, terms, level, from_level):
+        """Contour terms rendered at ``from_level``, thinned and rescaled for ``level``."""
+        s = self.settings
+        out = []
+        for t in terms:
+            sub = t.subset(np.arange(0, len(t), 2 ** (level - from_level)))
+            sub.scale = s.silhouette_scale / 2 ** level
+            sub.hinge = None if s.silhouette_margin < 0 else s.silhouette_margin / 2 ** level
+            out.append(sub)
+        return out
+
     def set_anchor(self, state, images, renders):
         """Keep the appearance of an anchor frame as a persistent template (per view).
 
@@ -361,39 +388,18 @@ class DifferentialTracker:
         cost = 0.0
         accs = {}
         kin = self.body.kinematics(state.pose(0)) if self.calibrated else None
-
-        def view_system(c):
-            # calibrated views share one world pose: one forward kinematics for all
-            seg2world, seg_jac = kin if self.calibrated else self.body.kinematics(state.pose(c))
-            cam = self._camera_at(state.cameras[c], level)
-            A = b = None
-            cost_c, accs_c = 0.0, {}
-            for key, term, weight in terms_by_view[c]:
-                if term is None or len(term) == 0 or weight == 0:
-                    continue
-                stack = images[c].stacks[level] if term.name != "silhouette" \
-                    else images[c].sdf[level]
-                acc = accumulate(term, stack, cam, seg2world, self.body.n_segments,
-                                 with_scale=not self.calibrated,
-                                 extra_weight=em_weights.get((c, key)))
-                A = weight * acc.A if A is None else A + weight * acc.A
-                b = weight * acc.b if b is None else b + weight * acc.b
-                cost_c += weight * acc.cost
-                accs_c[(c, key)] = acc
-            if A is None:
-                return None, None, cost_c, accs_c
-            total = Accumulated(A, b, 0.0, 0.0, None, None)
-            Hc, gc = assemble(total, seg_jac,
-                              root_cols=roots_cols[c], angle_cols=angle_cols, n_params=P,
-                              scale_col=scale_cols[c])
-            return Hc, gc, cost_c, accs_c
-
-        for Hc, gc, cost_c, accs_c in self.map_views(view_system, len(terms_by_view)):
-            cost += cost_c
-            accs.update(accs_c)
-            if Hc is not None:
-                H += Hc
-                g += gc
+        if self.calibrated:
+            H, g, cost, accs = self._stacked_system(state, level, terms_by_view, images,
+                                                    em_weights, kin)
+        else:
+            for Hc, gc, cost_c, accs_c in self.map_views(
+                    lambda c: self._view_system(state, level, terms_by_view, images,
+                                                em_weights, c), len(terms_by_view)):
+                cost += cost_c
+                accs.update(accs_c)
+                if Hc is not None:
+                    H += Hc
+                    g += gc
         if self.settings.collision_weight > 0 and len(self.proxies.pairs):
             # Limbs must not pass through each other (penalty on sphere-proxy overlaps).
             seg2world, seg_jac = kin if self.calibrated else self.body.kinematics(state.pose(0))
@@ -405,6 +411,62 @@ class DifferentialTracker:
                 g[cols] += w * J.T @ r
                 cost += w * float(r @ r)
         return H, g, cost, accs
+
+    def _stacked_system(self, state, level, terms_by_view, images, em_weights, kin):
+        """Calibrated views: all views' terms summed per segment in one pass (they share
+        the world pose, so one kinematics and one mapping to the parameters serve them)."""
+        roots_cols, _, angle_cols, P = self.layout(len(state.cameras))
+        cached = self._stack_cache
+        if cached is None or cached[0] is not terms_by_view or cached[1] != level:
+            keys, parts, weights = [], [], []
+            for c, terms in enumerate(terms_by_view):
+                for key, term, weight in terms:
+                    if term is None or len(term) == 0 or weight == 0:
+                        continue
+                    keys.append((c, key))
+                    parts.append(term)
+                    weights.append(weight)
+            cached = (terms_by_view, level, keys, Stack(parts), weights)
+            self._stack_cache = cached
+        _, _, keys, stack, weights = cached
+        if not keys:
+            return np.zeros((P, P)), np.zeros(P), 0.0, {}
+        seg2world, seg_jac = kin
+        imgs = [images[c].stacks[level] if key != "silhouette" else images[c].sdf[level]
+                for c, key in keys]
+        cams = [self._camera_at(state.cameras[c], level) for c, _ in keys]
+        total, per_part = accumulate_stacked(stack, imgs, cams, weights, seg2world,
+                                             self.body.n_segments,
+                                             extra_weights=[em_weights.get(k) for k in keys])
+        H, g = assemble(total, seg_jac, root_cols=roots_cols[0], angle_cols=angle_cols,
+                        n_params=P)
+        return H, g, total.cost, dict(zip(keys, per_part))
+
+    def _view_system(self, state, level, terms_by_view, images, em_weights, c):
+        """One uncalibrated view's normal equations (its own root and scale)."""
+        roots_cols, scale_cols, angle_cols, P = self.layout(len(state.cameras))
+        seg2world, seg_jac = self.body.kinematics(state.pose(c))
+        cam = self._camera_at(state.cameras[c], level)
+        A = b = None
+        cost_c, accs_c = 0.0, {}
+        for key, term, weight in terms_by_view[c]:
+            if term is None or len(term) == 0 or weight == 0:
+                continue
+            stack = images[c].stacks[level] if term.name != "silhouette" \
+                else images[c].sdf[level]
+            acc = accumulate(term, stack, cam, seg2world, self.body.n_segments,
+                             with_scale=not self.calibrated,
+                             extra_weight=em_weights.get((c, key)))
+            A = weight * acc.A if A is None else A + weight * acc.A
+            b = weight * acc.b if b is None else b + weight * acc.b
+            cost_c += weight * acc.cost
+            accs_c[(c, key)] = acc
+        if A is None:
+            return None, None, cost_c, accs_c
+        total = Accumulated(A, b, 0.0, 0.0, None, None)
+        Hc, gc = assemble(total, seg_jac, root_cols=roots_cols[c], angle_cols=angle_cols,
+                          n_params=P, scale_col=scale_cols[c])
+        return Hc, gc, cost_c, accs_c
 
     def step(self, state_t, images_t, images_t1, previous=None, renders_t=None, start=None):
         """Track one frame: the pose at t+1 from the pose at t.
@@ -477,8 +539,16 @@ class DifferentialTracker:
         prior_center = state.copy()
         total_iters = 0
         cost = 0.0
-        for level in reversed(range(min(s.finest, s.levels - 1), s.levels)):
-            sil = self.contour_terms(state, level) if use_sil else None
+        finest = min(s.finest, s.levels - 1)
+        base_contour = None
+        for level in reversed(range(finest, s.levels)):
+            sil = None
+            if use_sil and s.contour_per_level:
+                sil = self.contour_terms(state, level)
+            elif use_sil:
+                if base_contour is None:
+                    base_contour = self.contour_terms(state, finest)
+                sil = self.coarser_contour(base_contour, level, finest)
             terms_by_view = []
             for c in range(V):
                 # Flow and anchor appearance sample the same image: one term, two weights.
@@ -574,7 +644,7 @@ class DifferentialTracker:
             if acc is None or term.uv is None:
                 continue
             # Anchor points carry NaN pixels: they keep their weight.
-            vals, ok = sample(images_t1[c].stacks[level], np.nan_to_num(term.uv, nan=-1.0))
+            vals, ok = sample_fast(images_t1[c].stacks[level], np.nan_to_num(term.uv, nan=-1.0))
             r_bg = vals[:, 0] - term.target
             prior = np.where(term.weight >= self.settings.flow_weight, 0.8, 0.3)
             p_fg = prior * np.exp(-0.5 * acc.residual ** 2 / sig2)

@@ -26,7 +26,6 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from . import se3
 
 
 @dataclass
@@ -125,8 +124,8 @@ def image_with_gradients(image):
 def sample(stack, uv):
     """Bilinear samples of a (H, W, C) float32 image at pixels ``uv`` (N, 2).
 
-    Exact bilinear interpolation in numpy (cv2.remap quantises positions to 1/32 pixel, which
-    would cap the sub-pixel precision of the tracker).
+    Exact bilinear interpolation in numpy, for tests and finite differences (see
+    :func:`sample_fast` for the tracker's inner loop).
 
     Returns
     -------
@@ -149,6 +148,31 @@ def sample(stack, uv):
     top = flat[i00] * (1 - fu) + flat[i00 + 1] * fu
     bottom = flat[i00 + w] * (1 - fu) + flat[i00 + w + 1] * fu
     return top * (1 - fv) + bottom * fv, inside
+
+
+_REMAP_ROW = 1024       # cv2.remap maps are images: at most 32767 wide, so fold long lists
+
+
+def sample_fast(stack, uv):
+    """:func:`sample` through ``cv2.remap``: four times faster, positions rounded to 1/32 px.
+
+    The rounding (about 0.2 mm on a body 4 m from a 500 px camera) is far below what the
+    tracker resolves, and the Gauss-Newton rows use the sampled gradients, not differences of
+    samples; keep :func:`sample` for finite-difference checks.
+    """
+    h, w, C = stack.shape
+    n = len(uv)
+    u = uv[:, 0]
+    v = uv[:, 1]
+    inside = (u >= 0) & (u <= w - 1) & (v >= 0) & (v <= h - 1)   # NaN compares False
+    rows = -(-n // _REMAP_ROW) if n > _REMAP_ROW else 1
+    width = _REMAP_ROW if n > _REMAP_ROW else max(n, 1)
+    m = np.zeros((rows * width, 2), np.float32)
+    m[:n] = uv
+    m[:n][~inside] = 0.0
+    out = cv2.remap(stack, m.reshape(rows, width, 2), None, cv2.INTER_LINEAR,
+                    borderMode=cv2.BORDER_REPLICATE)
+    return out.reshape(-1, C)[:n], inside
 
 
 def geman_mcclure_weights(r, scale):
@@ -228,6 +252,16 @@ class Accumulated:
     inside: np.ndarray
 
 
+def _moved_points(term, seg2world):
+    """World points of a term at segment transforms ``seg2world`` (one product per segment)."""
+    X = np.empty((len(term), 3))
+    for k, lo, hi in term.groups:
+        T = seg2world[k]
+        np.matmul(term.ref_points[lo:hi], T[:3, :3].T, out=X[lo:hi])
+        X[lo:hi] += T[:3, 3]
+    return X
+
+
 def accumulate(term, stack, camera, seg2world, n_segments, *, with_scale=False, robust=True,
                extra_weight=None):
     """Residuals and per-segment normal equations of one term at one pose.
@@ -251,30 +285,42 @@ def accumulate(term, stack, camera, seg2world, n_segments, *, with_scale=False, 
     -------
     Accumulated
     """
-    X = se3.apply(seg2world[term.segment], term.ref_points)
+    X = _moved_points(term, seg2world)
     uv, pullback = _projection(camera, X)
-    vals, inside = sample(stack, uv)
+    vals, inside = sample_fast(stack, uv)
     if hasattr(camera, "K"):
         inside &= pullback.depth > 1e-3
-    r = (vals[:, 0] - term.target).astype(np.float64)
+    r = vals[:, 0].astype(np.float64)
+    r -= term.target
     grad = vals[:, 1:3].astype(np.float64)
     if term.hinge is not None:
         # one-sided: only values above the target by more than the hinge margin count
-        r = r - term.hinge
+        r -= term.hinge
         active = r > 0
-        r = np.where(active, r, 0.0)
-        grad = grad * active[:, None]
-    w = term.weight * inside
-    if extra_weight is not None:
-        w = w * extra_weight
+        r[~active] = 0.0
+        grad[~active] = 0.0
+    base = term.weight * inside                                # weights without the robust part
+    w = base if extra_weight is None else base * extra_weight
+    r2 = r * r
+    s2 = term.scale ** 2
     if robust:
-        w = w * geman_mcclure_weights(r, term.scale)
+        rho = r2 / (r2 + s2)
+        w = w * np.square(1.0 - rho)                           # Geman-McClure IRLS weight
+        cost = float(base @ rho)
+    else:
+        cost = float(base @ r2)
     # g = grad^T dpi/dX [I | -X^]: the row of the linear system in twist coordinates
     gp = pullback(grad)                                        # (N, 3) = dI/dX
     g = np.empty((len(r), 7))
     g[:, :3] = gp
-    g[:, 3:6] = np.cross(X, gp)                                # -X^ applied, transposed
-    g[:, 6] = (grad * (uv - camera.c)).sum(axis=1) if with_scale else 0.0
+    # -X^ applied, transposed: X x gp, written out (np.cross is slow on short arrays)
+    g[:, 3] = X[:, 1] * gp[:, 2] - X[:, 2] * gp[:, 1]
+    g[:, 4] = X[:, 2] * gp[:, 0] - X[:, 0] * gp[:, 2]
+    g[:, 5] = X[:, 0] * gp[:, 1] - X[:, 1] * gp[:, 0]
+    if with_scale:
+        g[:, 6] = grad[:, 0] * (uv[:, 0] - camera.c[0]) + grad[:, 1] * (uv[:, 1] - camera.c[1])
+    else:
+        g[:, 6] = 0.0
     S = n_segments
     A = np.zeros((S, 7, 7))
     b = np.zeros((S, 7))
@@ -282,9 +328,134 @@ def accumulate(term, stack, camera, seg2world, n_segments, *, with_scale=False, 
     for k, lo, hi in term.groups:
         A[k] = gw[lo:hi].T @ g[lo:hi]
         b[k] = gw[lo:hi].T @ r[lo:hi]
-    s2 = term.scale ** 2
-    cost = float(np.sum(term.weight * inside * (r * r / (r * r + s2) if robust else r * r)))
     return Accumulated(A, b, cost, float(w.sum()), r, inside)
+
+
+class Stack:
+    """Terms of several views that share one set of segment transforms (calibrated views),
+    laid out once for :func:`accumulate_stacked`: points concatenated part after part, and
+    the order that groups them by segment for the per-segment sums.
+
+    Parameters
+    ----------
+    parts : list of Term
+    """
+
+    def __init__(self, parts):
+        self.parts = parts
+        sizes = [len(t) for t in parts]
+        self.bounds = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
+        if not parts:
+            parts = [Term(0, np.zeros(0, int), np.zeros((0, 3)), np.zeros(0), np.zeros(0), 1.0)]
+        seg = np.concatenate([t.segment for t in parts])
+        self.order = np.argsort(seg, kind="stable")
+        self.unorder = np.empty_like(self.order)
+        self.unorder[self.order] = np.arange(len(seg))
+        sorted_seg = seg[self.order]
+        segs, first = np.unique(sorted_seg, return_index=True)
+        self.groups = list(zip(segs.tolist(), first.tolist(),
+                               first[1:].tolist() + [len(seg)]))
+        self.ref_sorted = np.concatenate([t.ref_points for t in parts])[self.order]
+        self.target = np.concatenate([t.target for t in parts]).astype(np.float64)
+        self.weight = np.concatenate([t.weight for t in parts]).astype(np.float64)
+        self.scale2 = np.concatenate([np.full(len(t), float(t.scale) ** 2) for t in parts])
+        hinged = [t.hinge is not None for t in parts]
+        self.hinged = np.repeat(hinged, [len(t) for t in parts])
+        self.hinge = np.concatenate([np.full(len(t), t.hinge if t.hinge is not None else 0.0)
+                                     for t in parts])
+        self.any_hinge = any(hinged)
+
+
+def accumulate_stacked(stack_terms, images, cameras, weights, seg2world, n_segments, *,
+                       extra_weights=None):
+    """:func:`accumulate` over several terms at once, summed per segment into one system.
+
+    Valid when every term moves with the same ``seg2world`` (calibrated views share the world
+    pose): the per-segment normal equations of all views add up before they are mapped to the
+    pose parameters, and everything but the projection and the image sampling runs once over
+    all points (Yamamoto et al.'s stacked system, eqs. 8-12).
+
+    Parameters
+    ----------
+    stack_terms : Stack
+    images : list of array (H, W, 3)
+        Per part, the image with gradients it samples.
+    cameras : list of camera
+        Per part, at the image's resolution.
+    weights : list of float
+        Per part, the term weight.
+    extra_weights : list of array or None, optional
+        Per part, EM ownership weights.
+
+    Returns
+    -------
+    total : Accumulated
+        Summed A (S, 7, 7), b and cost; ``residual``/``inside`` are None.
+    parts : list of Accumulated
+        Per part: cost, count, residual and inside (``A``/``b`` None).
+    """
+    st = stack_terms
+    bounds = st.bounds
+    n = bounds[-1]
+    # world points of all parts: one product per segment, then back to the parts' order
+    Xs = np.empty((n, 3))
+    for k, lo, hi in st.groups:
+        T = seg2world[k]
+        np.matmul(st.ref_sorted[lo:hi], T[:3, :3].T, out=Xs[lo:hi])
+        Xs[lo:hi] += T[:3, 3]
+    X = Xs[st.unorder]
+    vals = np.empty((n, 3), np.float32)
+    inside = np.empty(n, bool)
+    pulls = []
+    for i in range(len(st.parts)):
+        lo, hi = bounds[i], bounds[i + 1]
+        uv, pullback = _projection(cameras[i], X[lo:hi])
+        vals[lo:hi], inside[lo:hi] = sample_fast(images[i], uv)
+        if hasattr(cameras[i], "K"):
+            inside[lo:hi] &= pullback.depth > 1e-3
+        pulls.append(pullback)
+    r = vals[:, 0].astype(np.float64)
+    r -= st.target
+    grad = vals[:, 1:3].astype(np.float64)
+    if st.any_hinge:
+        r -= st.hinge
+        off = st.hinged & (r <= 0)
+        r[off] = 0.0
+        grad[off] = 0.0
+    part_w = np.repeat(np.asarray(weights, float), np.diff(bounds))
+    base = st.weight * inside
+    w = base
+    if extra_weights is not None and any(e is not None for e in extra_weights):
+        w = base * np.concatenate([np.ones(bounds[i + 1] - bounds[i]) if e is None else e
+                                   for i, e in enumerate(extra_weights)])
+    r2 = r * r
+    rho = r2 / (r2 + st.scale2)
+    w = w * np.square(1.0 - rho)
+    brho = base * rho
+    G = np.empty((n, 6))
+    for i, pull in enumerate(pulls):
+        lo, hi = bounds[i], bounds[i + 1]
+        G[lo:hi, :3] = pull(grad[lo:hi])
+    gp = G[:, :3]
+    G[:, 3] = X[:, 1] * gp[:, 2] - X[:, 2] * gp[:, 1]
+    G[:, 4] = X[:, 2] * gp[:, 0] - X[:, 0] * gp[:, 2]
+    G[:, 5] = X[:, 0] * gp[:, 1] - X[:, 1] * gp[:, 0]
+    out = []
+    for i in range(len(st.parts)):
+        lo, hi = bounds[i], bounds[i + 1]
+        out.append(Accumulated(None, None, float(brho[lo:hi].sum()), float(w[lo:hi].sum()),
+                               r[lo:hi], inside[lo:hi]))
+    W = part_w * w
+    order = st.order
+    G, R, W = G[order], r[order], W[order]
+    A = np.zeros((n_segments, 7, 7))
+    b = np.zeros((n_segments, 7))
+    GW = G * W[:, None]
+    for k, lo, hi in st.groups:
+        A[k, :6, :6] = GW[lo:hi].T @ G[lo:hi]
+        b[k, :6] = GW[lo:hi].T @ R[lo:hi]
+    cost = float(part_w @ brho)
+    return Accumulated(A, b, cost, float(W.sum()), None, None), out
 
 
 def assemble(acc, seg_jac, *, root_cols, angle_cols, n_params, scale_col=None):

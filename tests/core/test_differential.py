@@ -88,6 +88,58 @@ def test_views_in_parallel_give_the_same_step(body):
     assert np.array_equal(ra.residual, rb.residual) and ra.cost == rb.cost
 
 
+def test_stacked_calibrated_system_equals_the_sum_over_views(body):
+    """Calibrated views share the world pose: the one-pass stacked system (all views' points
+    summed per segment) is the per-view systems added up."""
+    p0, p1 = two_poses(body)
+    cams = ring_of_cameras(3, 3.5, 1.3, [0, 0, 0.9], SIZE, 350)
+    frames = model_plates(body, [p0, p1], cams, noise=1.0)
+    settings = D.Settings()
+    tracker = D.DifferentialTracker(body, True, settings)
+    state = D.State(np.stack([p0.root] * 3), p0.angles.copy(), cams)
+    ims0, ims1 = prepared(frames[0], settings, True), prepared(frames[1], settings, True)
+    renders = tracker.render_views(state)
+    flow = tracker.template_terms(state, ims0, renders)
+    sil = tracker.contour_terms(state, 0)
+    terms = [[("flow", flow[0][c], 1.0), ("silhouette", sil[c], 0.01)] for c in range(3)]
+    rng = np.random.default_rng(5)
+    em = {(1, "flow"): rng.uniform(0, 1, len(flow[0][1]))}
+    moved = tracker.retract(state, np.r_[rng.normal(0, 0.01, 6),
+                                         rng.normal(0, 0.05, body.n_dofs)])
+    kin = body.kinematics(moved.pose(0))
+    H, g, cost, accs = tracker._stacked_system(moved, 0, terms, ims1, em, kin)
+    H_sum, g_sum, cost_sum = 0, 0, 0.0
+    for c in range(3):
+        Hc, gc, cc, accs_c = tracker._view_system(moved, 0, terms, ims1, em, c)
+        H_sum, g_sum, cost_sum = H_sum + Hc, g_sum + gc, cost_sum + cc
+        for key, acc in accs_c.items():
+            assert np.allclose(acc.residual, accs[key].residual)
+            assert np.array_equal(acc.inside, accs[key].inside)
+    assert np.abs(H).max() > 0
+    assert np.allclose(H, H_sum, rtol=1e-9, atol=1e-9 * np.abs(H).max())
+    assert np.allclose(g, g_sum, rtol=1e-9, atol=1e-9 * np.abs(g).max())
+    assert np.isclose(cost, cost_sum, rtol=1e-12)
+
+
+def test_contour_once_per_frame_tracks_like_per_level(body):
+    """``contour_per_level=False`` renders the contour once (finest level, start pose) and thins
+    it for the coarser levels: the step still recovers the motion."""
+    p0, p1 = two_poses(body)
+    cams = ring_of_cameras(3, 3.5, 1.3, [0, 0, 0.9], SIZE, 350)
+    frames = model_plates(body, [p0, p1], cams, noise=1.0)
+    settings = D.Settings(anchor_weight=0.0, velocity=0.0, contour_per_level=False)
+    tracker = D.DifferentialTracker(body, True, settings)
+    state = D.State(np.stack([p0.root] * 3), p0.angles.copy(), cams)
+    ims0, ims1 = prepared(frames[0], settings, True), prepared(frames[1], settings, True)
+    base = tracker.contour_terms(state, 0)
+    coarse = tracker.coarser_contour(base, 2, 0)
+    assert all(abs(len(c) - len(b) / 4) <= 1 for b, c in zip(base, coarse))
+    assert coarse[0].scale == settings.silhouette_scale / 4
+    new, report = tracker.step(state, ims0, ims1)
+    error = np.linalg.norm(body.joints(p1) - body.joints(new.pose()), axis=1).mean()
+    assert error < 0.004 and np.all(report.iou > 0.95)
+
+
 def test_step_respects_joint_limits(body):
     p0, _ = two_poses(body)
     p1 = p0.copy()
