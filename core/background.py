@@ -33,15 +33,20 @@ class BackgroundModel:
     sigma: float
     known: np.ndarray = None
 
+    def difference2(self, frame):
+        """Squared colour distance of a frame from the background, (H, W) float32."""
+        d = cv2.subtract(_as_float(frame), self.image)
+        d = cv2.multiply(d, d)
+        return cv2.transform(d, np.ones((1, 3), np.float32))    # sum over the channels
+
     def difference(self, frame):
         """Colour distance of a frame from the background, (H, W) float32."""
-        f = _as_float(frame)
-        return np.linalg.norm(f - self.image, axis=2)
+        return np.sqrt(self.difference2(frame))
 
     def foreground(self, frame, *, k=4.0, min_level=0.06):
         """Foreground mask of a frame, (H, W) bool, cleaned of specks and small holes."""
-        d = self.difference(frame)
-        mask = (d > max(k * self.sigma, min_level)).astype(np.uint8)
+        d2 = self.difference2(frame)
+        mask = (d2 > np.float32(max(k * self.sigma, min_level) ** 2)).astype(np.uint8)
         kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (3, 3))
         mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, kernel)
         mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, kernel, iterations=2)

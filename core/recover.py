@@ -119,10 +119,24 @@ def unexplained_foreground(foreground, labels, known=None, min_px=UNEXPLAINED_MI
     return cv2.morphologyEx(rest, cv2.MORPH_OPEN, kernel) > 0
 
 
+class _RestOfBody:
+    """The pixels the model covers with segments other than a limb's, looked up at the
+    scored points only (``rest[v, u]``), not formed as a full mask."""
+
+    def __init__(self, labels, segments):
+        self.labels = labels
+        n = max(int(labels.max()) + 2, int(np.max(segments)) + 2)
+        self.table = np.ones(n, bool)
+        self.table[0] = False                   # background (-1)
+        self.table[np.asarray(segments) + 1] = False
+
+    def __getitem__(self, index):
+        return self.table[self.labels[index] + 1]
+
+
 def _rest_of_body(labels, group):
     """Per view, the pixels the model covers with segments other than the limb's."""
-    return [None if lab is None else (lab >= 0) & ~np.isin(lab, group.segments)
-            for lab in labels]
+    return [None if lab is None else _RestOfBody(lab, group.segments) for lab in labels]
 
 
 class LimbSearch:

@@ -10,6 +10,7 @@ Working images are the plates scaled so that their longer side is at most ``max_
 results are reported in the plates' own pixels.
 """
 
+import threading
 from dataclasses import dataclass, field
 
 import cv2
@@ -60,6 +61,19 @@ class Initial:
     warnings: list = field(default_factory=list)
 
 
+_PREFETCH = None
+
+
+def _prefetch():
+    """One background thread that prepares the next frame's images while a frame is tracked."""
+    global _PREFETCH
+    if _PREFETCH is None:
+        from concurrent.futures import ThreadPoolExecutor
+
+        _PREFETCH = ThreadPoolExecutor(max_workers=1, thread_name_prefix="zoopraxis-frames")
+    return _PREFETCH
+
+
 class FrameSource:
     """Working-resolution colour frames of all views, decoded once and kept for the take.
 
@@ -77,8 +91,16 @@ class FrameSource:
                  * int(round(plates[v].image_size[1] * factors[v])) * 3 for v in views]
         self.per_frame = sum(sizes)
         self.budget = budget_bytes
+        self.lock = threading.Lock()
 
     def colour(self, frame):
+        cached = self.cache.get(frame)
+        if cached is not None:
+            return cached
+        with self.lock:     # decoders are not thread-safe (the next frame is read ahead)
+            return self._read(frame)
+
+    def _read(self, frame):
         if frame in self.cache:
             return self.cache[frame]
         out = []
@@ -453,10 +475,14 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
         tracker.set_anchor(st, ims, renders)
         prev = None
         out = {}
+        # The next frame's images (decoding, foreground, pyramids, distance images: OpenCV
+        # work that runs outside the GIL) are prepared in a thread while this one is tracked.
+        ahead = _prefetch().submit(images, start + step) if start != stop else None
         for f in range(start + step, stop + step, step):
             if cancel is not None and cancel():
                 raise Cancelled(out)
-            ims1 = images(f)
+            ims1 = ahead.result()
+            ahead = _prefetch().submit(images, f + step) if f != stop else None
             new, rep = tracker.step(st, ims, ims1, prev, renders)
             prev, st, ims, renders = st, new, ims1, rep.renders
             rep.renders = None      # full-size images: keep them only for the next step
