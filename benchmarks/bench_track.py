@@ -110,7 +110,7 @@ def write_plates(scene, folder):
     return out
 
 
-def run_case(name, spec, *, quick, init_mode, anchor_every):
+def run_case(name, spec, *, quick, init_mode, anchor_every, workers=1):
     from zoopraxis.core import track as T
 
     bvh, start, n, views, calibrated, noise, clutter, build, fps, every = spec
@@ -135,7 +135,7 @@ def run_case(name, spec, *, quick, init_mode, anchor_every):
             raise SystemExit("--init truth needs calibrated cases")
         init = T.Initial(body, {f: p for f, p in zip(anchor_frames, poses)}, cams)
     t0 = time.perf_counter()
-    res = T.track(plates, anchors, cams, init=init)
+    res = T.track(plates, anchors, cams, init=init, workers=workers)
     elapsed = time.perf_counter() - t0
     for plate in plates.values():
         plate.close()
@@ -177,7 +177,12 @@ def main(argv=None):
                    help="start from the clicked markers (default) or from the true pose")
     p.add_argument("--anchor-every", type=int, default=0,
                    help="add marker anchors every N frames (default: frame 0 only)")
+    p.add_argument("--workers", type=int, default=0,
+                   help="processes for the passes of takes with several anchors (default: one "
+                        "per core, at most 4, as `zoopraxis track`)")
     args = p.parse_args(argv)
+    workers = args.workers or min(os.cpu_count() or 1, 4)
+    print(f"{os.cpu_count()} cores; passes of multi-anchor takes in {workers} processes")
     if not (DATA / "cmu_mocap").is_dir():
         sys.exit(f"no motion capture at {DATA / 'cmu_mocap'} (set ZOOPRAXIS_SHARED_DATA)")
     header = (f"{'case':<14}{'views':>5} {'mode':>5}{'anch':>5}{'frames':>7}{'MPJPE':>8}{'PA-MPJPE':>9}"
@@ -187,7 +192,7 @@ def main(argv=None):
     print("-" * len(header))
     for name in args.cases.split(","):
         r = run_case(name, CASES[name], quick=args.quick, init_mode=args.init,
-                     anchor_every=args.anchor_every)
+                     anchor_every=args.anchor_every, workers=workers)
         print(f"{r['case']:<14}{r['views']:>5} {r['mode']:>5}{r['anchors']:>5}{r['frames']:>7}{r['mpjpe']:>8.1f}"
               f"{r['pa']:>9.1f}{r['knee']:>7.1f}{r['elbow']:>7.1f}{r['lost']:>5}"
               f"{r['uncertain']:>7}{r['off']:>7}{r['off_ok']:>6}{r['recovered']:>6}"

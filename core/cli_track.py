@@ -1,6 +1,7 @@
 """``zoopraxis track``: plates and markers in, result.json out (DESIGN, Command line)."""
 
 import argparse
+import os
 import time
 
 from .cli_common import add_output_arguments, check_output, open_plates, parse_view_values
@@ -31,6 +32,9 @@ def build_parser():
     p.add_argument("--particles", type=int, default=2000,
                    help="particles of the particle and hybrid trackers (default 2000)")
     p.add_argument("--seed", type=int, default=2345)
+    p.add_argument("--workers", type=int, default=0,
+                   help="processes for the differential tracker's passes (a take with several "
+                        "anchors has several); default: one per core, at most 4")
     p.add_argument("--refine-body", action="store_true",
                    help="after tracking, refine the limb lengths on the silhouettes and clicks "
                         "of the whole take and track again, keeping the better track "
@@ -59,6 +63,8 @@ def main(argv):
     if args.calibration:
         cameras = calibfile.check_views(calibfile.read_calibration(args.calibration),
                                         list(opened), args.calibration)
+    if args.workers < 0:
+        raise ZoopraxisError(f"--workers {args.workers}: give 0 (one per core) or more")
     if args.refine_body and args.tracker != "differential":
         raise ZoopraxisError("--refine-body works with --tracker differential only")
     if args.refine_body and cameras is None:
@@ -76,7 +82,8 @@ def main(argv):
         elif args.tracker == "differential":
             from .track import track
 
-            result = track(opened, anchors, cameras, **kwargs)
+            workers = args.workers or min(os.cpu_count() or 1, 4)
+            result = track(opened, anchors, cameras, workers=workers, **kwargs)
         else:
             try:
                 from . import hybrid

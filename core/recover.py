@@ -167,9 +167,16 @@ class LimbSearch:
         self.attract = attract
         self.draws = draws
         self.margin = margin
+        self.seed = seed
         self.rng = np.random.default_rng(seed)
         self.groups = limb_groups(body)
         self.point_segment, self.points = interior_points(body.primitives())
+
+    def reseed(self, key=()):
+        """Restart the draws from a seed made of the search's own and ``key`` (non-negative
+        ints, e.g. a tracking pass's first and last frame), so a pass draws the same samples
+        whatever ran before it."""
+        self.rng = np.random.default_rng([self.seed, *(int(k) for k in key)])
 
     def score(self, roots, angles, segments, cameras, sdfs, rest, unexplained=None):
         """Silhouette score of a batch of poses for one limb, mean over points and views.

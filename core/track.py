@@ -10,6 +10,7 @@ Working images are the plates scaled so that their longer side is at most ``max_
 results are reported in the plates' own pixels.
 """
 
+import os
 import threading
 from dataclasses import dataclass, field
 
@@ -62,6 +63,14 @@ class Initial:
 
 
 _PREFETCH = None
+
+
+def _forget_prefetch():
+    global _PREFETCH
+    _PREFETCH = None        # a forked child has none of its parent's threads
+
+
+os.register_at_fork(after_in_child=_forget_prefetch)
 
 
 def _prefetch():
@@ -374,8 +383,93 @@ def check_take(plates, anchors, cameras, frames, offsets):
     return views, offsets, frames, inside
 
 
+def _run_in_turn(run, jobs, progress, cancel, total):
+    """Run the passes one after the other; a cancel keeps the frames tracked so far."""
+    results = {}
+    done = 0
+
+    def report(n):
+        nonlocal done
+        done += n
+        if progress is not None:
+            progress(done, total)
+
+    for job in jobs:
+        try:
+            results[job] = run(*job, report, cancel)
+        except Cancelled as exc:
+            results[job] = exc.args[0]
+            return results, True
+    return results, False
+
+
+def _can_fork():
+    """Worker processes share the take by forking: POSIX systems other than macOS (where
+    forking a process with system frameworks loaded is unsafe), and not inside Blender."""
+    import multiprocessing
+    import sys
+
+    return (sys.platform.startswith("linux") and "bpy" not in sys.modules
+            and "fork" in multiprocessing.get_all_start_methods())
+
+
+_FORKED = None      # (run, counter, stop event): what a forked worker runs
+
+
+def _ignore_interrupt():
+    """Ctrl-C reaches the whole process group: the parent turns it into a polite stop."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _forked_pass(job):
+    run, counter, stop = _FORKED
+
+    def report(n):
+        with counter.get_lock():
+            counter.value += n
+
+    try:
+        return run(*job, report, stop.is_set), False
+    except Cancelled as exc:
+        return exc.args[0], True
+
+
+def _run_in_processes(run, jobs, workers, progress, cancel, total):
+    """Run independent passes in forked worker processes (they inherit the plates, the
+    background models and the tracker), polling progress and cancel every quarter second."""
+    import multiprocessing
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+
+    global _FORKED
+    ctx = multiprocessing.get_context("fork")
+    counter = ctx.Value("i", 0)
+    stop = ctx.Event()
+    _FORKED = (run, counter, stop)
+    results, cancelled = {}, False
+    try:
+        with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_ignore_interrupt) as pool:
+            futures = {pool.submit(_forked_pass, job): job for job in jobs}
+            pending = set(futures)
+            while pending:
+                finished, pending = wait(pending, timeout=0.25, return_when=FIRST_COMPLETED)
+                for fut in finished:
+                    out, was_cancelled = fut.result()
+                    results[futures[fut]] = out
+                    cancelled |= was_cancelled
+                if progress is not None:
+                    progress(counter.value, total)
+                if cancel is not None and not stop.is_set() and cancel():
+                    stop.set()
+    finally:
+        _FORKED = None
+    return results, cancelled or stop.is_set()
+
+
 def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template="full",
-          settings=None, init=None, max_size=960, progress=None, cancel=None, log=None):
+          settings=None, init=None, max_size=960, progress=None, cancel=None, log=None,
+          workers=1):
     """Track a take with the differential tracker.
 
     Parameters
@@ -394,6 +488,10 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
     progress : callable(done, total), optional
     cancel : callable() -> bool, optional
         Polled once a frame; on cancel the frames already tracked are returned.
+    workers : int
+        Processes for the tracking passes (a take with several anchors has several
+        independent passes); 1 runs them in turn. Worker processes fork, so they are used on
+        Linux outside Blender only.
 
     Returns
     -------
@@ -458,17 +556,18 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
 
     anchor_frames = [a.frame for a in inside]
     passes, total = plan_passes(anchor_frames, frames)
-    done = 0
 
     states, reports = {}, {}
     for a in anchor_frames:
         states[a] = state_at(a)
         reports[a] = None
 
-    def run(start, stop):
+    def run(start, stop, report, should_stop):
         """Track from anchor ``start`` to ``stop`` (inclusive), either direction."""
-        nonlocal done
         step = 1 if stop > start else -1
+        # each pass draws its own search samples: the same result whichever runs first
+        if tracker.search is not None:
+            tracker.search.reseed((start, stop))
         st = state_at(start)
         ims = images(start)
         renders = tracker.render_views(st)
@@ -479,7 +578,7 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
         # work that runs outside the GIL) are prepared in a thread while this one is tracked.
         ahead = _prefetch().submit(images, start + step) if start != stop else None
         for f in range(start + step, stop + step, step):
-            if cancel is not None and cancel():
+            if should_stop is not None and should_stop():
                 raise Cancelled(out)
             ims1 = ahead.result()
             ahead = _prefetch().submit(images, f + step) if f != stop else None
@@ -487,9 +586,7 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
             prev, st, ims, renders = st, new, ims1, rep.renders
             rep.renders = None      # full-size images: keep them only for the next step
             out[f] = (new, rep)
-            done += 1
-            if progress is not None:
-                progress(done, total)
+            report(1)
         return out
 
     def blended_fit(state, frame):
@@ -497,26 +594,31 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
         pass's."""
         return silhouette_measures(tracker, state, source.colour(frame), backgrounds, use_bg)
 
-    cancelled = False
-    try:
-        for a, b, kind in passes:
-            fwd = run(a, b)
-            if kind != "blend":
-                for f, (st, rep) in fwd.items():
-                    states[f], reports[f] = st, rep
-                continue
-            bwd = run(b, a)
-            weights = blend_weights([fwd[f][1] for f in range(a + 1, b)],
-                                    [bwd[f][1] for f in range(a + 1, b)])
-            for f, w in zip(range(a + 1, b), weights):
+    jobs = [(a, b) for a, b, _ in passes] + [(b, a) for a, b, kind in passes if kind == "blend"]
+    jobs.sort(key=lambda job: -abs(job[1] - job[0]))       # longest first: even out workers
+    if workers > 1 and len(jobs) > 1 and _can_fork():
+        log(f"tracking {len(jobs)} passes in {min(workers, len(jobs))} processes")
+        results, cancelled = _run_in_processes(run, jobs, min(workers, len(jobs)), progress,
+                                               cancel, total)
+    else:
+        results, cancelled = _run_in_turn(run, jobs, progress, cancel, total)
+
+    for a, b, kind in passes:
+        fwd = results.get((a, b), {})
+        bwd = results.get((b, a), {}) if kind == "blend" else {}
+        inner = range(a + 1, b)
+        if kind == "blend" and all(f in fwd and f in bwd for f in inner):
+            weights = blend_weights([fwd[f][1] for f in inner], [bwd[f][1] for f in inner])
+            for f, w in zip(inner, weights):
                 states[f] = blend_states(fwd[f][0], bwd[f][0], w)
-                reports[f] = blend_report(fwd[f][1], bwd[f][1], w,
-                                           blended_fit(states[f], f))
-    except Cancelled as exc:
-        cancelled = True
-        for f, (st, rep) in exc.args[0].items():
-            if f not in states:
-                states[f], reports[f] = st, rep
+                reports[f] = blend_report(fwd[f][1], bwd[f][1], w, blended_fit(states[f], f))
+            continue
+        # a single pass, or a pair cut short by a cancel: keep every frame tracked
+        for part in (fwd, bwd):
+            for f, (st, rep) in part.items():
+                if f not in states:
+                    states[f], reports[f] = st, rep
+    if cancelled:
         log("cancelled: keeping the frames tracked so far")
 
     return make_result(body, views, plates, factors, states, reports, calibrated, init,

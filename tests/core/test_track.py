@@ -84,6 +84,69 @@ def test_cancel_keeps_the_frames_done(take):
     assert res.extra["cancelled"] is True
 
 
+class FrozenPlate:
+    """A synthetic plate rendered once (the scene's sensor noise is drawn anew at every
+    render), so that two runs see the same images."""
+
+    def __init__(self, plate):
+        self.name, self.path, self.fps = plate.name, plate.path, plate.fps
+        self.image_size, self.num_frames = plate.image_size, plate.num_frames
+        self.images = [plate.read(f) for f in range(plate.num_frames)]
+
+    def __len__(self):
+        return self.num_frames
+
+    def read(self, frame, **_):
+        return self.images[frame]
+
+
+def test_passes_in_worker_processes_give_the_same_track(take):
+    """Three anchors make five passes; forked workers track them side by side and the
+    result is the one tracking them in turn gives, progress included."""
+    if not T._can_fork():
+        pytest.skip("worker processes fork: Linux only")
+    scene, joints, body, poses = take
+    cams = {c.name: c for c in scene.cameras}
+    frozen = {k: FrozenPlate(p) for k, p in synth.scene_plates(scene).items()}
+    anchors = anchors_at(scene, joints, (0, 3, 6))
+    init = T.Initial(body, {f: poses[f] for f in (0, 3, 6)}, cams)
+    calls = {1: [], 2: []}
+    res = {w: T.track(frozen, anchors, cams, init=init, workers=w,
+                      progress=lambda d, t, w=w: calls[w].append((d, t))) for w in (1, 2)}
+    assert list(res[2].frames) == list(range(N))
+    assert np.array_equal(res[1].angles, res[2].angles)
+    assert np.array_equal(res[1].roots, res[2].roots)
+    assert res[1].status == res[2].status
+    # 3 + 3 + 3 + 3 + 1 frames tracked (blended stretches twice), all reported
+    assert calls[1][-1] == calls[2][-1] == (13, 13)
+
+
+def test_cancel_with_worker_processes_keeps_what_they_tracked(take):
+    if not T._can_fork():
+        pytest.skip("worker processes fork: Linux only")
+    res = run(take, anchor_frames=(0, 6), workers=2, cancel=lambda: True)
+    assert res.extra["cancelled"] is True
+    assert {0, 6} <= set(res.frames)
+
+
+def test_an_error_in_a_worker_process_reaches_the_caller(take, monkeypatch):
+    if not T._can_fork():
+        pytest.skip("worker processes fork: Linux only")
+    import os
+
+    parent = os.getpid()
+    prepare = T.prepare_images
+
+    def failing(*args, **kw):
+        if os.getpid() != parent:
+            raise ZoopraxisError("view 'cam1', frame 4: cannot be prepared")
+        return prepare(*args, **kw)
+
+    monkeypatch.setattr(T, "prepare_images", failing)
+    with pytest.raises(ZoopraxisError, match="frame 4: cannot be prepared"):
+        run(take, anchor_frames=(0, 6), workers=2)
+
+
 def test_uncalibrated_single_view(take):
     scene, joints, body, poses = take
     cam = scene.cameras[0]
