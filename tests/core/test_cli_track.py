@@ -57,6 +57,7 @@ def test_track_writes_a_result(take, tmp_path):
 @pytest.mark.parametrize("change, message", [
     (["--frames", "0:50"], "inside the plate"),
     (["--offset", "cam7=2"], "view 'cam7'"),
+    (["--workers", "-1"], "--workers -1"),
 ])
 def test_track_bad_input_is_one_line(take, tmp_path, change, message):
     run = zoopraxis(*track_args(take, tmp_path / "r.json", *change))
