@@ -252,16 +252,6 @@ class Accumulated:
     inside: np.ndarray
 
 
-def _moved_points(term, seg2world):
-    """World points of a term at segment transforms ``seg2world`` (one product per segment)."""
-    X = np.empty((len(term), 3))
-    for k, lo, hi in term.groups:
-        T = seg2world[k]
-        np.matmul(term.ref_points[lo:hi], T[:3, :3].T, out=X[lo:hi])
-        X[lo:hi] += T[:3, 3]
-    return X
-
-
 def accumulate(term, stack, camera, seg2world, n_segments, *, with_scale=False, robust=True,
                extra_weight=None):
     """Residuals and per-segment normal equations of one term at one pose.
@@ -285,56 +275,20 @@ def accumulate(term, stack, camera, seg2world, n_segments, *, with_scale=False, 
     -------
     Accumulated
     """
-    X = _moved_points(term, seg2world)
-    uv, pullback = _projection(camera, X)
-    vals, inside = sample_fast(stack, uv)
-    if hasattr(camera, "K"):
-        inside &= pullback.depth > 1e-3
-    r = vals[:, 0].astype(np.float64)
-    r -= term.target
-    grad = vals[:, 1:3].astype(np.float64)
-    if term.hinge is not None:
-        # one-sided: only values above the target by more than the hinge margin count
-        r -= term.hinge
-        active = r > 0
-        r[~active] = 0.0
-        grad[~active] = 0.0
-    base = term.weight * inside                                # weights without the robust part
-    w = base if extra_weight is None else base * extra_weight
-    r2 = r * r
-    s2 = term.scale ** 2
-    if robust:
-        rho = r2 / (r2 + s2)
-        w = w * np.square(1.0 - rho)                           # Geman-McClure IRLS weight
-        cost = float(base @ rho)
-    else:
-        cost = float(base @ r2)
-    # g = grad^T dpi/dX [I | -X^]: the row of the linear system in twist coordinates
-    gp = pullback(grad)                                        # (N, 3) = dI/dX
-    g = np.empty((len(r), 7))
-    g[:, :3] = gp
-    # -X^ applied, transposed: X x gp, written out (np.cross is slow on short arrays)
-    g[:, 3] = X[:, 1] * gp[:, 2] - X[:, 2] * gp[:, 1]
-    g[:, 4] = X[:, 2] * gp[:, 0] - X[:, 0] * gp[:, 2]
-    g[:, 5] = X[:, 0] * gp[:, 1] - X[:, 1] * gp[:, 0]
-    if with_scale:
-        g[:, 6] = grad[:, 0] * (uv[:, 0] - camera.c[0]) + grad[:, 1] * (uv[:, 1] - camera.c[1])
-    else:
-        g[:, 6] = 0.0
-    S = n_segments
-    A = np.zeros((S, 7, 7))
-    b = np.zeros((S, 7))
-    gw = g * w[:, None]
-    for k, lo, hi in term.groups:
-        A[k] = gw[lo:hi].T @ g[lo:hi]
-        b[k] = gw[lo:hi].T @ r[lo:hi]
-    return Accumulated(A, b, cost, float(w.sum()), r, inside)
+    layout = getattr(term, "_stack", None)
+    if layout is None or layout.parts[0] is not term:
+        layout = term._stack = Stack([term])
+    total, (part,) = accumulate_stacked(layout, [stack], [camera], [1.0], seg2world,
+                                        n_segments, with_scale=with_scale, robust=robust,
+                                        extra_weights=[extra_weight])
+    return Accumulated(total.A, total.b, part.cost, part.count, part.residual, part.inside)
 
 
 class Stack:
     """Terms of several views that share one set of segment transforms (calibrated views),
     laid out once for :func:`accumulate_stacked`: points concatenated part after part, and
-    the order that groups them by segment for the per-segment sums.
+    the order that groups them by segment for the per-segment sums. The layout copies the
+    terms' targets, weights and scales: terms are not changed once laid out.
 
     Parameters
     ----------
@@ -367,7 +321,7 @@ class Stack:
 
 
 def accumulate_stacked(stack_terms, images, cameras, weights, seg2world, n_segments, *,
-                       extra_weights=None):
+                       with_scale=False, robust=True, extra_weights=None):
     """:func:`accumulate` over several terms at once, summed per segment into one system.
 
     Valid when every term moves with the same ``seg2world`` (calibrated views share the world
@@ -384,6 +338,11 @@ def accumulate_stacked(stack_terms, images, cameras, weights, seg2world, n_segme
         Per part, at the image's resolution.
     weights : list of float
         Per part, the term weight.
+    with_scale : bool
+        Fill the seventh column: the derivative in the log of a scaled-orthographic view's
+        scale (one view's terms only: the scale is the view's own parameter).
+    robust : bool
+        Geman-McClure weights and costs (False: plain least squares).
     extra_weights : list of array or None, optional
         Per part, EM ownership weights.
 
@@ -407,12 +366,15 @@ def accumulate_stacked(stack_terms, images, cameras, weights, seg2world, n_segme
     vals = np.empty((n, 3), np.float32)
     inside = np.empty(n, bool)
     pulls = []
+    centred = np.empty((n, 2)) if with_scale else None     # pixels about the scale's centre
     for i in range(len(st.parts)):
         lo, hi = bounds[i], bounds[i + 1]
         uv, pullback = _projection(cameras[i], X[lo:hi])
         vals[lo:hi], inside[lo:hi] = sample_fast(images[i], uv)
         if hasattr(cameras[i], "K"):
             inside[lo:hi] &= pullback.depth > 1e-3
+        if with_scale:
+            centred[lo:hi] = uv - cameras[i].c
         pulls.append(pullback)
     r = vals[:, 0].astype(np.float64)
     r -= st.target
@@ -429,10 +391,13 @@ def accumulate_stacked(stack_terms, images, cameras, weights, seg2world, n_segme
         w = base * np.concatenate([np.ones(bounds[i + 1] - bounds[i]) if e is None else e
                                    for i, e in enumerate(extra_weights)])
     r2 = r * r
-    rho = r2 / (r2 + st.scale2)
-    w = w * np.square(1.0 - rho)
+    if robust:
+        rho = r2 / (r2 + st.scale2)
+        w = w * np.square(1.0 - rho)                       # Geman-McClure IRLS weight
+    else:
+        rho = r2
     brho = base * rho
-    G = np.empty((n, 6))
+    G = np.empty((n, 7 if with_scale else 6))
     for i, pull in enumerate(pulls):
         lo, hi = bounds[i], bounds[i + 1]
         G[lo:hi, :3] = pull(grad[lo:hi])
@@ -440,6 +405,8 @@ def accumulate_stacked(stack_terms, images, cameras, weights, seg2world, n_segme
     G[:, 3] = X[:, 1] * gp[:, 2] - X[:, 2] * gp[:, 1]
     G[:, 4] = X[:, 2] * gp[:, 0] - X[:, 0] * gp[:, 2]
     G[:, 5] = X[:, 0] * gp[:, 1] - X[:, 1] * gp[:, 0]
+    if with_scale:
+        G[:, 6] = grad[:, 0] * centred[:, 0] + grad[:, 1] * centred[:, 1]
     out = []
     for i in range(len(st.parts)):
         lo, hi = bounds[i], bounds[i + 1]
@@ -451,9 +418,10 @@ def accumulate_stacked(stack_terms, images, cameras, weights, seg2world, n_segme
     A = np.zeros((n_segments, 7, 7))
     b = np.zeros((n_segments, 7))
     GW = G * W[:, None]
+    m = G.shape[1]
     for k, lo, hi in st.groups:
-        A[k, :6, :6] = GW[lo:hi].T @ G[lo:hi]
-        b[k, :6] = GW[lo:hi].T @ R[lo:hi]
+        A[k, :m, :m] = GW[lo:hi].T @ G[lo:hi]
+        b[k, :m] = GW[lo:hi].T @ R[lo:hi]
     cost = float(part_w @ brho)
     return Accumulated(A, b, cost, float(W.sum()), None, None), out
 
