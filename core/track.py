@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 
 from . import se3
-from .background import estimate_background, model_coverage, silhouette_iou
+from .background import estimate_background, model_coverage, signed_distance, silhouette_iou
 from .body import Pose
 from .camera import ScaledOrthoCamera
 from .differential import DifferentialTracker, Settings, State, prepare_images
@@ -37,6 +37,9 @@ FIT_LOST, FIT_UNCERTAIN = 0.6, 0.8           # fraction of the anchor frame's si
 IOU_LOST, IOU_UNCERTAIN = 0.5, 0.6
 RESIDUAL_LOST, RESIDUAL_UNCERTAIN = 4.0, 2.5   # times the take's median residual
 MIN_ANCHOR_FIT = 0.6     # below this the foreground masks of a view are too poor to use
+# A limb's silhouette score (recover.LimbSearch.fit: +1 inside the person's silhouette in every
+# view, -1 outside): the whole body can overlap well while one leg is half a metre off.
+LIMB_LOST, LIMB_UNCERTAIN = -0.25, 0.5
 
 
 @dataclass
@@ -269,13 +272,16 @@ def take_backgrounds(tracker, source, views, frames, inside, state_at, log):
     return backgrounds, use_bg, ref_fit, ref_iou
 
 
-def silhouette_measures(tracker, state, colours, backgrounds, use_bg):
+def silhouette_measures(tracker, state, colours, backgrounds, use_bg, limbs=False):
     """Silhouette fit and overlap of a pose in every view whose background is used.
 
     Returns
     -------
     fit, iou : array, shape (V,)
         NaN where a view has no usable background.
+    limb_fit : dict of str to float
+        With ``limbs`` and two or more views with silhouettes: each limb's silhouette score
+        (:meth:`recover.LimbSearch.fit`).
     """
     V = len(colours)
     fit = np.full(V, np.nan)
@@ -283,15 +289,19 @@ def silhouette_measures(tracker, state, colours, backgrounds, use_bg):
     if not any(use_bg):
         return fit, iou
     renders = tracker.render_views(state, want=())
+    sdfs = [None] * V
     for c, img in enumerate(colours):
         if use_bg[c]:
             fg = backgrounds[c].foreground(img)
             fit[c] = model_coverage(renders[c].label >= 0, fg)
             iou[c] = silhouette_iou(renders[c].label >= 0, fg)
-    return fit, iou
+            sdfs[c] = signed_distance(fg)
+    if not limbs or tracker.search is None or sum(d is not None for d in sdfs) < 2:
+        return fit, iou
+    return fit, iou, tracker.search.fit(state, sdfs, [r.label for r in renders])
 
 
-def frame_status(rel_fit, rel_iou, residual_ratio):
+def frame_status(rel_fit, rel_iou, residual_ratio, limb_fit=None):
     """ok, uncertain or lost, from one frame's diagnostics.
 
     Parameters
@@ -300,7 +310,10 @@ def frame_status(rel_fit, rel_iou, residual_ratio):
         Silhouette fit and overlap per view relative to the anchor frame's (NaN: no mask).
     residual_ratio : float
         The frame's worst grey residual over the take's median.
+    limb_fit : dict of str to float, optional
+        Each limb's silhouette score (two or more views with silhouettes).
     """
+    worst_limb = min(limb_fit.values()) if limb_fit else np.inf
     rel_fit = np.asarray(rel_fit, float)
     rel_iou = np.asarray(rel_iou, float)
     rel_fit, rel_iou = rel_fit[np.isfinite(rel_fit)], rel_iou[np.isfinite(rel_iou)]
@@ -311,9 +324,11 @@ def frame_status(rel_fit, rel_iou, residual_ratio):
                or not (len(rel_fit) or len(rel_iou)))
     if ((len(rel_fit) and np.median(rel_fit) < FIT_LOST)
             or (len(rel_iou) and np.median(rel_iou) < IOU_LOST)
-            or (residual_ratio > RESIDUAL_LOST and doubted)):
+            or (residual_ratio > RESIDUAL_LOST and doubted)
+            or worst_limb < LIMB_LOST):
         return "lost"
     if ((len(rel_fit) and rel_fit.min() < FIT_UNCERTAIN)
+            or worst_limb < LIMB_UNCERTAIN
             or (len(rel_iou) and rel_iou.min() < IOU_UNCERTAIN)
             or residual_ratio > RESIDUAL_UNCERTAIN):
         return "uncertain"
@@ -325,11 +340,13 @@ def blend_report(fwd, bwd, w, measured):
     fit and overlap measured on the blended pose."""
     from .differential import StepReport
 
-    fit, iou = measured
+    fit, iou = measured[:2]
     out = StepReport(residual=(1 - w) * fwd.residual + w * bwd.residual,
                      iou=iou, cost=(1 - w) * fwd.cost
                      + w * bwd.cost, iterations=fwd.iterations + bwd.iterations,
                      renders=None, coverage=fit)
+    if len(measured) > 2:
+        out.limb_fit = measured[2]
     out.recovered = sorted(set(fwd.recovered or []) | set(bwd.recovered or []))
     return out
 
@@ -592,7 +609,8 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
     def blended_fit(state, frame):
         """Silhouette fit and overlap of a blended pose, measured anew: they are not either
         pass's."""
-        return silhouette_measures(tracker, state, source.colour(frame), backgrounds, use_bg)
+        return silhouette_measures(tracker, state, source.colour(frame), backgrounds, use_bg,
+                                   limbs=calibrated)
 
     jobs = [(a, b) for a, b, _ in passes] + [(b, a) for a, b, kind in passes if kind == "blend"]
     jobs.sort(key=lambda job: -abs(job[1] - job[0]))       # longest first: even out workers
@@ -680,7 +698,8 @@ def make_result(body, views, plates, factors, states, reports, calibrated, init,
         if f in anchor_frames:
             status.append("ok")
             continue
-        status.append(frame_status(fit[i] / ref_fit, iou[i] / ref_iou, res_all[i].max() / med))
+        status.append(frame_status(fit[i] / ref_fit, iou[i] / ref_iou, res_all[i].max() / med,
+                                   limb_fit[i]))
     fps = plates[views[0]].fps or 30.0
     body_info = {"template": body.template, "shapes": body.shapes,
                  "dims": {k: round(v, 5) for k, v in body.dims.items()},

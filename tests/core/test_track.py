@@ -64,6 +64,10 @@ def test_later_anchor_pulls_the_end_back(take):
     assert np.allclose(res.joints3d[N - 1], body.joints(poses[N - 1]), atol=1e-9)
     error = np.linalg.norm(res.joints3d - joints, axis=2).mean(axis=1)
     assert error.max() < 0.06
+    # blended frames carry limb scores measured on the blended pose (they feed the status)
+    blended = res.extra["limb_fit"][N // 2]
+    assert set(blended) == {"left leg", "right leg", "left arm", "right arm"}
+    assert all(-1.0 <= v <= 1.0 for v in blended.values())
 
 
 def test_tracks_backward_before_the_first_anchor(take):
@@ -213,6 +217,12 @@ def test_frame_status_from_silhouettes_and_residuals():
     # fast motion: a high residual with silhouettes that fit is uncertain, not lost
     assert T.frame_status([1.0, 0.95], [1.0, 0.9], 5.0) == "uncertain"
     assert T.frame_status([1.0, 0.95], [1.0, 0.55], 5.0) == "lost"
+    # the body overlaps well but one limb lies outside the silhouettes
+    limbs = {"left leg": 0.9, "right leg": 0.8, "left arm": 0.7, "right arm": 0.85}
+    assert T.frame_status([1.0, 0.95], [1.0, 0.9], 1.0, limbs) == "ok"
+    assert T.frame_status([1.0, 0.95], [1.0, 0.9], 1.0, {**limbs, "right leg": 0.3}) \
+        == "uncertain"
+    assert T.frame_status([1.0, 0.95], [1.0, 0.9], 1.0, {**limbs, "right leg": -0.6}) == "lost"
 
 
 def test_blend_weights_trust_the_pass_that_holds():
