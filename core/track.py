@@ -421,12 +421,15 @@ def _run_in_turn(run, jobs, progress, cancel, total):
 
 
 def _can_fork():
-    """Worker processes share the take by forking: POSIX systems other than macOS (where
-    forking a process with system frameworks loaded is unsafe), and not inside Blender."""
+    """Worker processes share the take by forking: on Linux (macOS forbids forking a process
+    with system frameworks loaded, Windows cannot fork), and not inside the Blender application
+    (its window, GPU and job threads must not be forked; Blender as a Python module may)."""
     import multiprocessing
     import sys
 
-    return (sys.platform.startswith("linux") and "bpy" not in sys.modules
+    bpy = sys.modules.get("bpy")
+    in_blender = bpy is not None and bool(getattr(getattr(bpy, "app", None), "binary_path", ""))
+    return (sys.platform.startswith("linux") and not in_blender
             and "fork" in multiprocessing.get_all_start_methods())
 
 
