@@ -28,6 +28,18 @@ DATA = Path(os.environ.get("ZOOPRAXIS_SHARED_DATA", HERE.parents[1] / "shared" /
 FRAMES = range(80, 176)
 
 
+def _ranges(frames):
+    """'3-5, 9' from [3, 4, 5, 9]."""
+    out, start = [], None
+    for i, f in enumerate(frames):
+        if start is None:
+            start = f
+        if i + 1 == len(frames) or frames[i + 1] != f + 1:
+            out.append(f"{start}" if start == f else f"{start}-{f}")
+            start = None
+    return ", ".join(out) or "none"
+
+
 def main():
     video = DATA / "sports2d" / "walk_and_jumps.mp4"
     if not video.is_file():
@@ -38,6 +50,9 @@ def main():
     result = track({"cam0": plate}, anchors, None, frames=FRAMES, log=print)
     elapsed = time.perf_counter() - t0
     fit = np.array(result.extra["silhouette_fit"])[:, 0]
+    for status in ("lost", "uncertain"):
+        frames = [int(f) for f, s in zip(result.frames, result.status) if s == status]
+        print(f"{status}: {_ranges(frames)}")
     fit = fit[fit >= 0]
     print(f"{'footage':<16}{'frames':>7}{'ok':>5}{'uncert':>7}{'lost':>5}{'fit':>6}{'fps':>6}")
     print(f"{'walk side-on':<16}{result.num_frames:>7}{result.status.count('ok'):>5}"

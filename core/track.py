@@ -311,7 +311,7 @@ def frame_status(rel_fit, rel_iou, residual_ratio, limb_fit=None):
     residual_ratio : float
         The frame's worst grey residual over the take's median.
     limb_fit : dict of str to float, optional
-        Each limb's silhouette score (two or more views with silhouettes).
+        Each limb's silhouette score (:meth:`recover.LimbSearch.fit`).
     """
     worst_limb = min(limb_fit.values()) if limb_fit else np.inf
     rel_fit = np.asarray(rel_fit, float)
@@ -328,7 +328,9 @@ def frame_status(rel_fit, rel_iou, residual_ratio, limb_fit=None):
             or worst_limb < LIMB_LOST):
         return "lost"
     if ((len(rel_fit) and rel_fit.min() < FIT_UNCERTAIN)
-            or worst_limb < LIMB_UNCERTAIN
+            # in one view a limb in front of the body scores low where it belongs (its points
+            # fall on the rest of the body); only a limb outside the silhouette says "lost"
+            or (worst_limb < LIMB_UNCERTAIN and len(rel_fit) >= 2)
             or (len(rel_iou) and rel_iou.min() < IOU_UNCERTAIN)
             or residual_ratio > RESIDUAL_UNCERTAIN):
         return "uncertain"

@@ -223,6 +223,9 @@ def test_frame_status_from_silhouettes_and_residuals():
     assert T.frame_status([1.0, 0.95], [1.0, 0.9], 1.0, {**limbs, "right leg": 0.3}) \
         == "uncertain"
     assert T.frame_status([1.0, 0.95], [1.0, 0.9], 1.0, {**limbs, "right leg": -0.6}) == "lost"
+    # one view: a low score may be occlusion by the body; outside the silhouette is lost
+    assert T.frame_status([1.0], [1.0], 1.0, {**limbs, "right leg": 0.3}) == "ok"
+    assert T.frame_status([1.0], [1.0], 1.0, {**limbs, "right leg": -0.6}) == "lost"
 
 
 def test_blend_weights_trust_the_pass_that_holds():
