@@ -309,12 +309,11 @@ def test_pose_prior_file_and_exclusion():
         init.PosePrior.load(init.DEFAULT_POSE_PRIOR.with_name("missing.npz"))
 
 
-def test_held_out_prior_prefers_captured_poses_to_their_flipped_limbs(shared_data):
-    """Poses of a take the prior never saw are likelier than the same poses with a thigh and
-    an upper arm swung to the opposite side."""
+def held_out_and_flipped(shared_data):
+    """Angles of 131_03 every 25 frames, and the same with a thigh and an upper arm swung to
+    the opposite side."""
     from zoopraxis.core import bvh, fit3d
 
-    prior = init.PosePrior.load(exclude=["131_03"])
     joints = bvh.standard_joints(bvh.load_cmu(shared_data / "cmu_mocap" / "131_03.bvh",
                                               fps=30))[::25]
     body, poses, _ = fit3d.fit_sequence(joints)
@@ -323,6 +322,14 @@ def test_held_out_prior_prefers_captured_poses_to_their_flipped_limbs(shared_dat
     for name in ("l_hip_flex", "r_shoulder_flex"):
         k = body.dof_index(name)
         flipped[:, k] = -a[:, k] - 0.3
+    return a, flipped
+
+
+def test_held_out_prior_prefers_captured_poses_to_their_flipped_limbs(shared_data):
+    """Poses of a take the prior never saw are likelier than the same poses with a thigh and
+    an upper arm swung to the opposite side."""
+    prior = init.PosePrior.load(exclude=["131_03"])
+    a, flipped = held_out_and_flipped(shared_data)
     worse = prior.cost(flipped) - prior.cost(a)
     assert np.mean(worse > 0) >= 0.8 and np.median(worse) > 2.0
 
@@ -339,18 +346,9 @@ def _mixture_cost(prior, angles):
 def test_prior_mixture_prefers_held_out_poses_to_their_flipped_limbs(shared_data):
     """The mixture that stands for the learned density in least squares keeps its preference
     (as the kernel density does, test above)."""
-    from zoopraxis.core import bvh, fit3d
-
     kin = init._kinematics("full")
     prior = init.PosePrior.load(exclude=["131_03"]).with_broad(kin.prior_mean, kin.prior_sigma)
-    joints = bvh.standard_joints(bvh.load_cmu(shared_data / "cmu_mocap" / "131_03.bvh",
-                                              fps=30))[::25]
-    body, poses, _ = fit3d.fit_sequence(joints)
-    a = np.array([p.angles for p in poses])
-    flipped = a.copy()
-    for name in ("l_hip_flex", "r_shoulder_flex"):
-        k = body.dof_index(name)
-        flipped[:, k] = -a[:, k] - 0.3
+    a, flipped = held_out_and_flipped(shared_data)
     worse = _mixture_cost(prior, flipped) - _mixture_cost(prior, a)
     assert np.mean(worse > 0) >= 0.8 and np.median(worse) > 2.0
     for dofs, means, whiten, costs in prior.mixture():
