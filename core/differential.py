@@ -20,6 +20,7 @@ Calibrated views share one world pose (Yamamoto eqs. 8-12); uncalibrated views e
 own scaled-orthographic pose of the body and share the joint angles (B&M eq. 28).
 """
 
+import os
 from dataclasses import dataclass, field
 
 import cv2
@@ -68,6 +69,14 @@ class Settings:
 
 
 _POOL = None
+
+
+def _forget_pool():
+    global _POOL
+    _POOL = None            # a forked child has none of its parent's threads
+
+
+os.register_at_fork(after_in_child=_forget_pool)
 
 
 def _pool():

@@ -133,6 +133,17 @@ def test_cancel_with_worker_processes_keeps_what_they_tracked(take):
     assert {0, 6} <= set(res.frames)
 
 
+def test_worker_processes_with_view_threads(take):
+    """The parent's thread pools (views, next-frame images) exist before the fork; a child
+    must make its own instead of waiting on threads it does not have."""
+    if not T._can_fork():
+        pytest.skip("worker processes fork: Linux only")
+    from zoopraxis.core.differential import Settings
+
+    res = run(take, anchor_frames=(0, 6), workers=2, settings=Settings(threads=2))
+    assert list(res.frames) == list(range(N)) and not res.extra["cancelled"]
+
+
 def test_an_error_in_a_worker_process_reaches_the_caller(take, monkeypatch):
     if not T._can_fork():
         pytest.skip("worker processes fork: Linux only")
