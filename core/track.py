@@ -474,16 +474,23 @@ def _run_in_processes(run, jobs, workers, progress, cancel, total):
         with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_ignore_interrupt) as pool:
             futures = {pool.submit(_forked_pass, job): job for job in jobs}
             pending = set(futures)
-            while pending:
-                finished, pending = wait(pending, timeout=0.25, return_when=FIRST_COMPLETED)
-                for fut in finished:
-                    out, was_cancelled = fut.result()
-                    results[futures[fut]] = out
-                    cancelled |= was_cancelled
-                if progress is not None:
-                    progress(counter.value, total)
-                if cancel is not None and not stop.is_set() and cancel():
-                    stop.set()
+            try:
+                while pending:
+                    finished, pending = wait(pending, timeout=0.25,
+                                             return_when=FIRST_COMPLETED)
+                    for fut in finished:
+                        out, was_cancelled = fut.result()
+                        results[futures[fut]] = out
+                        cancelled |= was_cancelled
+                    if progress is not None:
+                        progress(counter.value, total)
+                    if cancel is not None and not stop.is_set() and cancel():
+                        stop.set()
+            except BaseException:
+                # an error in one pass, or a second Ctrl-C: the other workers stop at their
+                # next frame instead of finishing their passes before the pool closes
+                stop.set()
+                raise
     finally:
         _FORKED = None
     return results, cancelled or stop.is_set()
