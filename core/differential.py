@@ -68,25 +68,20 @@ class Settings:
                                       # once per frame at the finest level, at the start pose)
 
 
-_POOL = None
+_POOLS = {}
+# a forked child has none of its parent's threads: it makes its own pools
+os.register_at_fork(after_in_child=_POOLS.clear)
 
 
-def _forget_pool():
-    global _POOL
-    _POOL = None            # a forked child has none of its parent's threads
-
-
-os.register_at_fork(after_in_child=_forget_pool)
-
-
-def _pool():
-    """A small thread pool shared by all trackers (the machines we run on have 2+ cores)."""
-    global _POOL
-    if _POOL is None:
+def thread_pool(name, workers):
+    """A thread pool made on first use and shared by the trackers, one per purpose."""
+    pool = _POOLS.get(name)
+    if pool is None:
         from concurrent.futures import ThreadPoolExecutor
 
-        _POOL = ThreadPoolExecutor(max_workers=2, thread_name_prefix="zoopraxis-view")
-    return _POOL
+        pool = _POOLS[name] = ThreadPoolExecutor(max_workers=workers,
+                                                 thread_name_prefix=f"zoopraxis-{name}")
+    return pool
 
 
 @dataclass
@@ -365,7 +360,7 @@ class DifferentialTracker:
     def map_views(self, fn, n):
         """``[fn(c) for c in range(n)]``, over views in parallel when ``settings.threads``."""
         if n > 1 and self.settings.threads > 1:
-            return list(_pool().map(fn, range(n)))
+            return list(thread_pool("views", 2).map(fn, range(n)))
         return [fn(c) for c in range(n)]
 
     # -- one frame ---------------------------------------------------------------------------------

@@ -10,7 +10,6 @@ Working images are the plates scaled so that their longer side is at most ``max_
 results are reported in the plates' own pixels.
 """
 
-import os
 import threading
 from dataclasses import dataclass, field
 
@@ -21,7 +20,7 @@ from . import se3
 from .background import estimate_background, model_coverage, signed_distance, silhouette_iou
 from .body import Pose
 from .camera import ScaledOrthoCamera
-from .differential import DifferentialTracker, Settings, State, prepare_images
+from .differential import DifferentialTracker, Settings, State, prepare_images, thread_pool
 from .errors import ZoopraxisError
 from .markers import check_markers
 from .plates import to_gray_float
@@ -63,27 +62,6 @@ class Initial:
     cameras: dict
     view_cameras: dict = None
     warnings: list = field(default_factory=list)
-
-
-_PREFETCH = None
-
-
-def _forget_prefetch():
-    global _PREFETCH
-    _PREFETCH = None        # a forked child has none of its parent's threads
-
-
-os.register_at_fork(after_in_child=_forget_prefetch)
-
-
-def _prefetch():
-    """One background thread that prepares the next frame's images while a frame is tracked."""
-    global _PREFETCH
-    if _PREFETCH is None:
-        from concurrent.futures import ThreadPoolExecutor
-
-        _PREFETCH = ThreadPoolExecutor(max_workers=1, thread_name_prefix="zoopraxis-frames")
-    return _PREFETCH
 
 
 class FrameSource:
@@ -605,12 +583,12 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
         out = {}
         # The next frame's images (decoding, foreground, pyramids, distance images: OpenCV
         # work that runs outside the GIL) are prepared in a thread while this one is tracked.
-        ahead = _prefetch().submit(images, start + step) if start != stop else None
+        ahead = thread_pool("frames", 1).submit(images, start + step) if start != stop else None
         for f in range(start + step, stop + step, step):
             if should_stop is not None and should_stop():
                 raise Cancelled(out)
             ims1 = ahead.result()
-            ahead = _prefetch().submit(images, f + step) if f != stop else None
+            ahead = thread_pool("frames", 1).submit(images, f + step) if f != stop else None
             new, rep = tracker.step(st, ims, ims1, prev, renders)
             prev, st, ims, renders = st, new, ims1, rep.renders
             rep.renders = None      # full-size images: keep them only for the next step
