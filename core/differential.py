@@ -58,8 +58,9 @@ class Settings:
     prior_weight: float = 0.01        # pull towards the prediction, relative to the data
     damping: float = 1e-3             # initial Levenberg-Marquardt damping
     collision_weight: float = 3e4     # limb overlap penalty, per square metre
-    threads: int = 1                  # >1: views solved in a thread pool (no gain measured at
-                                      # 480x360: numpy holds the GIL between small operations)
+    threads: int = 1                  # >1: views rendered, prepared and (uncalibrated) solved in
+                                      # a thread pool (no gain measured at 480x360: numpy holds
+                                      # the GIL between small operations)
     limb_search: bool = True          # silhouette search for limbs left behind (recover.py;
                                       # calibrated, two views or more)
     tolerance: float = 1e-5           # stop a level's iterations when no parameter moves more
