@@ -388,15 +388,12 @@ class DifferentialTracker:
         once (:func:`image_motion.assemble`).
         """
         roots_cols, scale_cols, angle_cols, P = self.layout(len(state.cameras))
-        H = np.zeros((P, P))
-        g = np.zeros(P)
-        cost = 0.0
-        accs = {}
         kin = self.body.kinematics(state.pose(0)) if self.calibrated else None
         if self.calibrated:
             H, g, cost, accs = self._stacked_system(state, level, terms_by_view, images,
                                                     em_weights, kin)
         else:
+            H, g, cost, accs = np.zeros((P, P)), np.zeros(P), 0.0, {}
             for Hc, gc, cost_c, accs_c in self.map_views(
                     lambda c: self._view_system(state, level, terms_by_view, images,
                                                 em_weights, c), len(terms_by_view)):

@@ -27,7 +27,6 @@ import cv2
 import numpy as np
 
 
-
 @dataclass
 class Term:
     """Model points with targets, observed in one view.
@@ -312,7 +311,7 @@ class Stack:
         self.ref_sorted = np.concatenate([t.ref_points for t in parts])[self.order]
         self.target = np.concatenate([t.target for t in parts]).astype(np.float64)
         self.weight = np.concatenate([t.weight for t in parts]).astype(np.float64)
-        self.scale2 = np.concatenate([np.full(len(t), float(t.scale) ** 2) for t in parts])
+        self.scale = np.concatenate([np.full(len(t), float(t.scale)) for t in parts])
         hinged = [t.hinge is not None for t in parts]
         self.hinged = np.repeat(hinged, [len(t) for t in parts])
         self.hinge = np.concatenate([np.full(len(t), t.hinge if t.hinge is not None else 0.0)
@@ -392,8 +391,8 @@ def accumulate_stacked(stack_terms, images, cameras, weights, seg2world, n_segme
                                    for i, e in enumerate(extra_weights)])
     r2 = r * r
     if robust:
-        rho = r2 / (r2 + st.scale2)
-        w = w * np.square(1.0 - rho)                       # Geman-McClure IRLS weight
+        rho = r2 / (r2 + st.scale * st.scale)
+        w = w * geman_mcclure_weights(r, st.scale)
     else:
         rho = r2
     brho = base * rho
