@@ -273,7 +273,8 @@ def silhouette_measures(tracker, state, colours, backgrounds, use_bg, limbs=Fals
             fg = backgrounds[c].foreground(img)
             fit[c] = model_coverage(renders[c].label >= 0, fg)
             iou[c] = silhouette_iou(renders[c].label >= 0, fg)
-            sdfs[c] = signed_distance(fg)
+            if limbs:
+                sdfs[c] = signed_distance(fg)
     if not limbs or tracker.search is None or sum(d is not None for d in sdfs) < 2:
         return fit, iou
     return fit, iou, tracker.search.fit(state, sdfs, [r.label for r in renders])
