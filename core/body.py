@@ -359,11 +359,9 @@ class BodyModel:
         E = se3.exp_se3(self.twists[None] * angles[..., None])          # (B, n, 4, 4)
         seg2world = np.empty((B, self.n_segments, 4, 4))
         prefix = np.empty((B, self.n_dofs, 4, 4))
-        dofs_of = self._dofs_of_segment
-        for k in range(self.n_segments):
-            parent = self.segment_parents[k]
+        for k, parent, dofs in self._plan:
             T = root if parent < 0 else seg2world[:, parent]
-            for j in dofs_of[k]:
+            for j in dofs:
                 prefix[:, j] = T
                 T = T @ E[:, j]
             seg2world[:, k] = T
@@ -376,6 +374,69 @@ class BodyModel:
             cached = [np.flatnonzero(self.dof_segment == k) for k in range(self.n_segments)]
             self._cache["dofs_of_segment"] = cached
         return cached
+
+    @property
+    def _plan(self):
+        """``(segment, parent, DOF indices)`` of every segment, parents first, as Python ints
+        (the kinematic loops run thousands of times a frame)."""
+        cached = self._cache.get("plan")
+        if cached is None:
+            cached = [(k, int(self.segment_parents[k]), self._dofs_of_segment[k].tolist())
+                      for k in range(self.n_segments)]
+            self._cache["plan"] = cached
+        return cached
+
+    def _chain_plan(self, segments):
+        """What :meth:`seg2world_of` needs for ``segments``: the DOFs of the segments and their
+        ancestors, and per such segment (parents first) its position, its parent's position
+        (-1: the root) and the positions of its DOFs among those DOFs."""
+        key = ("chain", segments)
+        cached = self._cache.get(key)
+        if cached is None:
+            need = set()
+            for k in segments:
+                while k >= 0 and k not in need:
+                    need.add(k)
+                    k = int(self.segment_parents[k])
+            chain = sorted(need)            # a parent always comes before its children
+            assert all(self.segment_parents[k] < k for k in chain)
+            where = {k: i for i, k in enumerate(chain)}
+            dofs, steps = [], []
+            for k in chain:
+                own = self._dofs_of_segment[k].tolist()
+                steps.append((where[k], where.get(int(self.segment_parents[k]), -1),
+                              list(range(len(dofs), len(dofs) + len(own)))))
+                dofs += own
+            cached = (np.array(dofs, dtype=int), steps, [where[k] for k in segments])
+            self._cache[key] = cached
+        return cached
+
+    def seg2world_of(self, pose, angles=None, segments=()):
+        """:meth:`seg2world` of some segments only: the product of exponentials runs over
+        their chains to the root, not the whole body (the same arithmetic, so the same values).
+
+        Parameters
+        ----------
+        pose, angles
+            As for :meth:`seg2world`; one root may also go with a batch of angles.
+        segments : sequence of int
+
+        Returns
+        -------
+        seg2world : array, shape (len(segments), 4, 4) or (B, len(segments), 4, 4)
+        """
+        root, angles, single = self._batch(pose, angles)
+        single = single and angles.shape[0] == 1
+        dofs, steps, pick = self._chain_plan(tuple(int(k) for k in segments))
+        E = se3.exp_se3(self.twists[dofs][None] * angles[:, dofs][..., None])
+        T_chain = np.empty((max(root.shape[0], angles.shape[0]), len(steps), 4, 4))
+        for i, parent, local in steps:
+            T = root if parent < 0 else T_chain[:, parent]
+            for j in local:
+                T = T @ E[:, j]
+            T_chain[:, i] = T
+        T = T_chain[:, pick]
+        return T[0] if single else T
 
     @staticmethod
     def _batch(pose_or_root, angles):

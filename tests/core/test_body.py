@@ -194,3 +194,22 @@ def test_bad_templates_and_dims():
         bm.make_body("full").segment_index("tail")
     with pytest.raises(ZoopraxisError, match="shape family"):
         bm.make_body("full", shapes="voxels")
+
+
+@pytest.mark.parametrize("template", bm.TEMPLATES)
+def test_seg2world_of_some_segments_equals_the_whole_body(template, rng):
+    body = bm.make_body(template)
+    roots = se3.exp_se3(rng.normal(size=(7, 6)))
+    angles = rng.uniform(body.lower, body.upper, size=(7, body.n_dofs))
+    full = body.seg2world(roots, angles)
+    for segments in ([0], [body.n_segments - 1], [3, 1], list(range(body.n_segments)),
+                     [body.n_segments - 1, 2, body.n_segments - 2]):
+        part = body.seg2world_of(roots, angles, segments)
+        assert part.shape == (7, len(segments), 4, 4)
+        assert np.allclose(part, full[:, segments], rtol=0, atol=1e-9)
+        # one root with a batch of angles, and one pose
+        assert np.allclose(body.seg2world_of(roots[2], angles, segments),
+                           body.seg2world(np.repeat(roots[2][None], 7, axis=0),
+                                          angles)[:, segments], rtol=0, atol=1e-9)
+        single = body.seg2world_of(bm.Pose(roots[4], angles[4]), segments=segments)
+        assert np.allclose(single, full[4, segments], rtol=0, atol=1e-9)

@@ -127,3 +127,58 @@ def test_step_recovers_a_kick_only_with_the_search(body, cams, search):
         # the kick is beyond the image-motion step's reach: this is what the search is for
         assert report.recovered == []
         assert err > 150
+
+
+def reference_score(search, roots, angles, segments, cameras, sdfs, rest, unexplained=None):
+    """LimbSearch.score the plain way: the whole body posed, the limb's points picked."""
+    from zoopraxis.core import recover as rc
+
+    sel = np.isin(search.point_segment, segments)
+    seg, pts = search.point_segment[sel], search.points[sel]
+    total, used = np.zeros(len(angles)), 0
+    for c, cam in enumerate(cameras):
+        if sdfs[c] is None:
+            continue
+        T = search.body.seg2world(np.repeat(roots[c][None], len(angles), axis=0), angles)[:, seg]
+        X = np.einsum("nmij,mj->nmi", T[..., :3, :3], pts) + T[..., :3, 3]
+        uv = cam.project(X.reshape(-1, 3)).reshape(len(angles), -1, 2)
+        h, w = sdfs[c].shape
+        u = np.clip(np.rint(uv[..., 0]), 0, w - 1).astype(int)
+        v = np.clip(np.rint(uv[..., 1]), 0, h - 1).astype(int)
+        off = (uv[..., 0] < 0) | (uv[..., 0] > w - 1) | (uv[..., 1] < 0) | (uv[..., 1] > h - 1)
+        s = np.where(off, -1.0, np.clip(-sdfs[c][v, u] / rc.SDF_SCALE, -1.0, 1.0))
+        if rest is not None and rest[c] is not None:
+            s = np.where((s > 0) & rest[c][v, u], rc.SHARED_CREDIT * s, s)
+        if unexplained is not None and unexplained[c] is not None:
+            s = s + rc.UNEXPLAINED_BONUS * (unexplained[c][v, u] & ~off)
+        total += s.mean(axis=1)
+        used += 1
+    return total / max(used, 1)
+
+
+def test_score_equals_the_whole_body_reference(body, cams, rng):
+    from zoopraxis.core.recover import _rest_of_body, unexplained_foreground
+
+    p0, p1 = kicked(body)
+    labels0 = silhouettes(body, p0, cams)
+    sdfs = [signed_distance(lab >= 0).astype(np.float32) for lab in silhouettes(body, p1, cams)]
+    sdfs[1] = None
+    unexplained = [None if d is None else unexplained_foreground(d < 0, lab)
+                   for d, lab in zip(sdfs, labels0)]
+    assert any(u is not None and u.any() for u in unexplained)
+    roots = np.stack([p0.root] * 3)
+    moved = roots.copy()
+    moved[2] = se3.exp_se3([0.05, 0, 0, 0, 0, 0.2]) @ roots[2]
+    search = LimbSearch(body)
+    for group in limb_groups(body):
+        angles = np.repeat(p0.angles[None], 30, axis=0)
+        angles[:, group.dofs] += rng.normal(size=(30, len(group.dofs))) * 0.6
+        angles = body.clamp(angles)
+        for segs in [group.segments] + [s for _, s in group.stages]:
+            for rs in (roots, moved):
+                rest = _rest_of_body(labels0, group)
+                plain = [r.table[r.labels + 1] for r in rest]     # as boolean images
+                for args in ((rest, unexplained), (plain, None), (None, unexplained)):
+                    got = search.score(rs, angles, segs, cams, sdfs, *args)
+                    want = reference_score(search, rs, angles, segs, cams, sdfs, *args)
+                    assert np.allclose(got, want, rtol=0, atol=1e-9)
