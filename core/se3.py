@@ -75,11 +75,18 @@ def _rodrigues_coefficients(theta):
     """``a = sin(t)/t``, ``b = (1 - cos t)/t^2``, ``c = (t - sin t)/t^3`` with series near 0."""
     theta = np.asarray(theta, dtype=float)
     small = theta < _SMALL_ANGLE
+    if not small.any():
+        # the common case: no series, and sin(t) once
+        sin = np.sin(theta)
+        t2 = theta * theta
+        return sin / theta, (1.0 - np.cos(theta)) / t2, (theta - sin) / (t2 * theta)
     t = np.where(small, 1.0, theta)
     t2 = t * t
-    a = np.where(small, 1.0 - theta**2 / 6.0, np.sin(t) / t)
-    b = np.where(small, 0.5 - theta**2 / 24.0, (1.0 - np.cos(t)) / t2)
-    c = np.where(small, 1.0 / 6.0 - theta**2 / 120.0, (t - np.sin(t)) / (t2 * t))
+    sin = np.sin(t)
+    theta2 = theta**2
+    a = np.where(small, 1.0 - theta2 / 6.0, sin / t)
+    b = np.where(small, 0.5 - theta2 / 24.0, (1.0 - np.cos(t)) / t2)
+    c = np.where(small, 1.0 / 6.0 - theta2 / 120.0, (t - sin) / (t2 * t))
     return a, b, c
 
 
@@ -196,9 +203,15 @@ def exp_se3(xi):
     """
     xi = np.asarray(xi, dtype=float)
     v, w = xi[..., :3], xi[..., 3:]
+    # exp_so3(w) and left_jacobian_so3(w) share the angle, coefficients and hat matrices
+    theta = np.linalg.norm(w, axis=-1)
+    a, b, c = _rodrigues_coefficients(theta)
+    W = hat3(w)
+    W2 = W @ W
+    b = b[..., None, None]
     T = np.zeros(xi.shape[:-1] + (4, 4))
-    T[..., :3, :3] = exp_so3(w)
-    T[..., :3, 3] = np.einsum("...ij,...j->...i", left_jacobian_so3(w), v)
+    T[..., :3, :3] = np.eye(3) + a[..., None, None] * W + b * W2
+    T[..., :3, 3] = np.einsum("...ij,...j->...i", np.eye(3) + b * W + c[..., None, None] * W2, v)
     T[..., 3, 3] = 1.0
     return T
 

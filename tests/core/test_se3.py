@@ -148,3 +148,24 @@ def test_check_rotation_errors():
         se3.check_rotation(np.full((3, 3), np.nan))
     with pytest.raises(ZoopraxisError, match="zero length"):
         se3.revolute_twist(np.zeros(3), np.zeros(3))
+
+
+def test_exp_se3_equals_its_rotation_and_left_jacobian(rng):
+    # exp_se3 computes the rotation and J_l(w) v in one pass; compare with the two functions
+    # and with the plain Rodrigues coefficients, including angles on the series branch.
+    xi = rng.normal(size=(4, 25, 6))
+    xi[0, ::3, 3:] *= 1e-9
+    xi[1, :, 3:] = 0.0
+    T = se3.exp_se3(xi)
+    assert np.allclose(T[..., :3, :3], se3.exp_so3(xi[..., 3:]), rtol=0, atol=1e-12)
+    Jv = np.einsum("...ij,...j->...i", se3.left_jacobian_so3(xi[..., 3:]), xi[..., :3])
+    assert np.allclose(T[..., :3, 3], Jv, rtol=0, atol=1e-12)
+    assert np.array_equal(T[..., 3, :], np.broadcast_to([0, 0, 0, 1.0], T.shape[:-2] + (4,)))
+    theta = np.concatenate([rng.uniform(1e-5, 3.0, 50), [0.0, 1e-9, 5e-7]])
+    a, b, c = se3._rodrigues_coefficients(theta)
+    big = theta > 1e-6
+    t = theta[big]
+    assert np.allclose(a[big], np.sin(t) / t, rtol=1e-12, atol=0)
+    assert np.allclose(b[big], (1 - np.cos(t)) / t**2, rtol=1e-12, atol=0)
+    assert np.allclose(c[big], (t - np.sin(t)) / t**3, rtol=1e-9, atol=0)
+    assert np.allclose([a[~big], b[~big], c[~big]], [[1.0], [0.5], [1 / 6]], atol=1e-12)
