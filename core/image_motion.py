@@ -206,12 +206,23 @@ def _projection(camera, X):
         z = Xc[:, 2]
         inv_z = 1.0 / np.where(np.abs(z) < 1e-12, 1e-12, z)
         x, y = Xc[:, 0] * inv_z, Xc[:, 1] * inv_z
-        uv = np.column_stack([K[0, 0] * x + K[0, 1] * y + K[0, 2], K[1, 1] * y + K[1, 2]])
+        fx, skew, cx, fy, cy = K[0, 0], K[0, 1], K[0, 2], K[1, 1], K[1, 2]
+        uv = np.empty((len(z), 2))
+        uv[:, 0] = fx * x + skew * y + cx
+        uv[:, 1] = fy * y + cy
 
         def pull(grad):
-            gu = grad[:, 0] * K[0, 0]
-            gv = grad[:, 0] * K[0, 1] + grad[:, 1] * K[1, 1]
-            gc = np.column_stack([gu * inv_z, gv * inv_z, -(gu * x + gv * y) * inv_z])
+            g0, g1 = grad[:, 0], grad[:, 1]
+            gu = g0 * fx
+            gv = g0 * skew + g1 * fy
+            gc = np.empty((len(gu), 3))
+            np.multiply(gu, inv_z, out=gc[:, 0])
+            np.multiply(gv, inv_z, out=gc[:, 1])
+            gu *= x
+            gv *= y
+            gu += gv
+            gu *= inv_z
+            np.negative(gu, out=gc[:, 2])
             return gc @ R
 
         return uv, _Pullback(pull, z)
@@ -361,7 +372,7 @@ def accumulate_stacked(stack_terms, images, cameras, weights, seg2world, n_segme
         T = seg2world[k]
         np.matmul(st.ref_sorted[lo:hi], T[:3, :3].T, out=Xs[lo:hi])
         Xs[lo:hi] += T[:3, 3]
-    X = Xs[st.unorder]
+    X = np.take(Xs, st.unorder, axis=0)       # np.take gathers rows several times faster
     vals = np.empty((n, 3), np.float32)
     inside = np.empty(n, bool)
     pulls = []
@@ -396,24 +407,28 @@ def accumulate_stacked(stack_terms, images, cameras, weights, seg2world, n_segme
     else:
         rho = r2
     brho = base * rho
-    G = np.empty((n, 7 if with_scale else 6))
+    # The rows g_i = [world gradient, X x world gradient] go straight into segment order:
+    # only the world gradients are gathered, the points are already sorted (Xs).
+    gp = np.empty((n, 3))
     for i, pull in enumerate(pulls):
         lo, hi = bounds[i], bounds[i + 1]
-        G[lo:hi, :3] = pull(grad[lo:hi])
-    gp = G[:, :3]
-    G[:, 3] = X[:, 1] * gp[:, 2] - X[:, 2] * gp[:, 1]
-    G[:, 4] = X[:, 2] * gp[:, 0] - X[:, 0] * gp[:, 2]
-    G[:, 5] = X[:, 0] * gp[:, 1] - X[:, 1] * gp[:, 0]
+        gp[lo:hi] = pull(grad[lo:hi])
+    order = st.order
+    gp = np.take(gp, order, axis=0)
+    G = np.empty((n, 7 if with_scale else 6))
+    G[:, :3] = gp
+    G[:, 3] = Xs[:, 1] * gp[:, 2] - Xs[:, 2] * gp[:, 1]
+    G[:, 4] = Xs[:, 2] * gp[:, 0] - Xs[:, 0] * gp[:, 2]
+    G[:, 5] = Xs[:, 0] * gp[:, 1] - Xs[:, 1] * gp[:, 0]
     if with_scale:
-        G[:, 6] = grad[:, 0] * centred[:, 0] + grad[:, 1] * centred[:, 1]
+        G[:, 6] = np.take(grad[:, 0] * centred[:, 0] + grad[:, 1] * centred[:, 1], order)
     out = []
     for i in range(len(st.parts)):
         lo, hi = bounds[i], bounds[i + 1]
         out.append(Accumulated(None, None, float(brho[lo:hi].sum()), float(w[lo:hi].sum()),
                                r[lo:hi], inside[lo:hi]))
     W = part_w * w
-    order = st.order
-    G, R, W = G[order], r[order], W[order]
+    R, W = np.take(r, order), np.take(W, order)
     A = np.zeros((n_segments, 7, 7))
     b = np.zeros((n_segments, 7))
     GW = G * W[:, None]

@@ -159,3 +159,69 @@ def test_fast_sampler_agrees_with_exact_bilinear(rng):
     assert np.abs(fast[ok] - exact[ok]).max() < 0.01
     few, _ = im.sample_fast(stack, uv[:3])
     assert np.allclose(few, fast[:3])
+
+
+@pytest.mark.parametrize("with_scale", [False, True])
+def test_stacked_accumulation_equals_a_point_by_point_reference(rng, with_scale):
+    """accumulate_stacked over several views against the plain computation: each point's
+    twist-space row from the camera's projection Jacobian, robust weights, hinges and EM
+    weights, summed per segment."""
+    body = make_body("full")
+    pose = Pose(se3.transform(p=[0, 0, 0.95]), rng.uniform(-0.2, 0.2, body.n_dofs))
+    seg2world = body.seg2world(pose)
+    K = [[150, 0.5, 79.5], [0, 140, 59.5], [0, 0, 1]]
+    cams, terms, images, extra = [], [], [], []
+    for v, eye in enumerate(([0.3, -3.0, 1.0], [2.5, -1.5, 1.2], [-2.0, 2.0, 0.8])):
+        R, t = look_at(eye, [0, 0, 0.8])
+        cams.append(ScaledOrthoCamera("o", (160, 120), s=50.0, R=R, t=t) if with_scale
+                    else PinholeCamera(f"c{v}", (160, 120), K, R=R, t=t))
+        n = 200 + 50 * v
+        seg = rng.integers(0, body.n_segments, size=n)
+        ref = body.reference_point("pelvis") + rng.normal(0, 0.3, size=(n, 3))
+        terms.append(im.Term(v, seg, ref, rng.uniform(0, 1, n), rng.uniform(0.5, 1, n),
+                             0.1 + 0.05 * v, hinge=0.05 if v == 1 else None))
+        images.append(im.image_with_gradients(smooth_image(rng)))
+        extra.append(None if v == 2 else rng.uniform(0.5, 1.5, n))
+    if with_scale:
+        terms, images, cams, extra = terms[:1], images[:1], cams[:1], extra[:1]
+    weights = [1.0, 0.7, 1.3][:len(terms)]
+    total, parts = im.accumulate_stacked(im.Stack(terms), images, cams, weights, seg2world,
+                                         body.n_segments, with_scale=with_scale,
+                                         extra_weights=extra)
+    A = np.zeros((body.n_segments, 7, 7))
+    b = np.zeros((body.n_segments, 7))
+    cost = count = 0.0
+    for term, image, cam, pw, e, part in zip(terms, images, cams, weights, extra, parts):
+        X = se3.apply(seg2world[term.segment], term.ref_points)
+        uv, Jp = cam.project_jacobian(X)
+        vals, inside = im.sample_fast(image, uv)
+        if hasattr(cam, "K"):
+            inside &= cam.cam_from_world(X)[:, 2] > 1e-3
+        r = vals[:, 0].astype(float) - term.target
+        grad = vals[:, 1:3].astype(float)
+        if term.hinge is not None:
+            r = r - term.hinge
+            grad[r <= 0] = 0.0
+            r[r <= 0] = 0.0
+        base = term.weight * inside
+        w = base * (1.0 if e is None else e) * im.geman_mcclure_weights(r, term.scale)
+        rows = np.einsum("ni,nij,njk->nk", grad, Jp, se3.point_velocity_matrix(X))
+        if with_scale:
+            rows = np.column_stack([rows, np.sum(grad * (uv - cam.c), axis=1)])
+        m = rows.shape[1]
+        np.add.at(A[:, :m, :m], term.segment, pw * w[:, None, None] * rows[:, :, None]
+                  * rows[:, None, :])
+        np.add.at(b[:, :m], term.segment, pw * (w * r)[:, None] * rows)
+        rho = base * r * r / (r * r + term.scale ** 2)
+        cost += pw * rho.sum()
+        count += pw * w.sum()
+        assert np.allclose(part.residual, r, rtol=0, atol=1e-12)
+        assert np.array_equal(part.inside, inside)
+        assert np.isclose(part.cost, rho.sum(), rtol=1e-9)
+        assert np.isclose(part.count, w.sum(), rtol=1e-9)
+    scale = np.abs(A).max()
+    assert scale > 0 and inside.any()
+    assert np.allclose(total.A, A, rtol=0, atol=1e-9 * scale)
+    assert np.allclose(total.b, b, rtol=0, atol=1e-9 * np.abs(b).max())
+    assert np.isclose(total.cost, cost, rtol=1e-9)
+    assert np.isclose(total.count, count, rtol=1e-9)
