@@ -340,8 +340,8 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
         # No refinement: the images are prepared only to measure the residual, at one level.
         settings = dataclasses.replace(settings, levels=1, iterations=settings.iterations[-1:])
     diff = GuidedTracker(body, True, settings)
-    backgrounds, use_bg, ref_fit, ref_iou = take_backgrounds(diff, source, views, frames,
-                                                             inside, state_at, log)
+    backgrounds, use_bg, ref_fit, ref_iou, ref_unexplained = take_backgrounds(
+        diff, source, views, frames, inside, state_at, log)
 
     def masks(colour):
         return [backgrounds[c].foreground(img) if use_bg[c] else None
@@ -458,7 +458,7 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
     result = make_result(body, views, plates, factors,
                           {f: item[0] for f, item in tracked.items()},
                           {f: item[1] for f, item in tracked.items()}, True, init,
-                          anchor_frames, frames, cancelled, ref_fit, ref_iou)
+                          anchor_frames, frames, cancelled, ref_fit, ref_iou, ref_unexplained)
     order = [int(f) for f in result.frames]
     filter_status = [tracked[f][3] for f in order]
     # At an anchor the pose is given: no spread (the filter's initial cloud is its own choice).

@@ -68,6 +68,53 @@ def test_later_anchor_pulls_the_end_back(take):
     blended = res.extra["limb_fit"][N // 2]
     assert set(blended) == {"left leg", "right leg", "left arm", "right arm"}
     assert all(-1.0 <= v <= 1.0 for v in blended.values())
+    # ... and their unexplained foreground, with the anchor's as the reference
+    assert 0.0 <= res.extra["unexplained"][N // 2][0] < 0.25
+    assert all(0.0 <= u < 0.25 for u in res.extra["unexplained_anchor"])
+
+
+def test_unexplained_foreground_flags_a_body_that_left_the_person(take):
+    """A pose that covers the person well by overlap but leaves a limb's pixels unexplained:
+    the measure rises well above the anchor's and the frame is not called ok."""
+    scene, joints, body, poses = take
+    from zoopraxis.core.differential import DifferentialTracker, State
+
+    cams = [c for c in scene.cameras]
+    tracker = DifferentialTracker(body, True)
+    true = State(np.stack([poses[0].root] * len(cams)), poses[0].angles.copy(), cams)
+    moved = true.copy()
+    names = list(body.dof_names)
+    for side in ("l", "r"):
+        moved.angles[names.index(f"{side}_hip_flex")] += np.radians(90.0)
+        moved.angles[names.index(f"{side}_shoulder_flex")] += np.radians(90.0)
+    plates = synth.scene_plates(scene)
+    colours = [plates[c.name].read(0) for c in cams]
+    from zoopraxis.core.background import estimate_background
+
+    backgrounds = [estimate_background([plates[c.name].read(f) for f in range(N)])
+                   for c in cams]
+    use = [True] * len(cams)
+    fit0, iou0, u0, _ = T.silhouette_measures(tracker, true, colours, backgrounds, use)
+    fit1, iou1, u1, _ = T.silhouette_measures(tracker, moved, colours, backgrounds, use)
+    assert np.all(u0 < 0.1)
+    assert np.max(u1 - u0) > T.UNEXPLAINED_UNCERTAIN
+    assert T.frame_status(fit1 / fit0, iou1 / iou0, 1.0, None, u1 - u0) != "ok"
+    assert T.frame_status([1.0] * len(cams), [1.0] * len(cams), 1.0, None, u1 - u0) \
+        == "uncertain"
+    assert T.frame_status(fit0 / fit0, iou0 / iou0, 1.0, None, u0 - u0) == "ok"
+
+
+def test_unexplained_fraction_counts_thick_blobs_only():
+    labels = np.full((60, 80), -1)
+    labels[10:30, 10:30] = 0                                        # the model: 400 px
+    fg = labels >= 0
+    fg = fg.copy()
+    fg[40:50, 50:70] = True                                         # a 10 x 20 blob: 200 px
+    fg[5, :] = True                                                 # a one-pixel line: noise
+    assert T.unexplained_fraction(fg, labels) == pytest.approx(0.5, abs=0.03)
+    known = np.ones_like(fg)
+    known[40:50, 50:70] = False                                     # never seen empty there
+    assert T.unexplained_fraction(fg, labels, known) < 0.02
 
 
 def test_tracks_backward_before_the_first_anchor(take):
@@ -237,6 +284,10 @@ def test_frame_status_from_silhouettes_and_residuals():
     # one view: a low score may be occlusion by the body; outside the silhouette is lost
     assert T.frame_status([1.0], [1.0], 1.0, {**limbs, "right leg": 0.3}) == "ok"
     assert T.frame_status([1.0], [1.0], 1.0, {**limbs, "right leg": -0.6}) == "lost"
+    # the overlap holds but the person's own pixels are left unexplained in one view
+    assert T.frame_status([1.0, 0.95], [1.0, 0.9], 1.0, None, [0.05, 0.1]) == "ok"
+    assert T.frame_status([1.0, 0.95], [1.0, 0.9], 1.0, None, [0.05, 0.4]) == "uncertain"
+    assert T.frame_status([1.0, 0.95], [1.0, 0.9], 1.0, None, [nan, nan]) == "ok"
 
 
 def test_blend_weights_trust_the_pass_that_holds():
