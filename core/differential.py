@@ -33,7 +33,7 @@ from .collision import body_proxies, penalty_system
 from .image_motion import (Accumulated, Stack, Term, accumulate, accumulate_stacked, assemble,
                            image_with_gradients, sample_fast)
 from .recover import LimbSearch, unexplained_foreground
-from .render import render
+from .render import render, surface_points
 
 
 @dataclass
@@ -310,7 +310,9 @@ class DifferentialTracker:
         def one(c):
             cam_l = self._camera_at(state.cameras[c], level)
             T = self.body.seg2world(state.pose(c))
-            rr = render(cam_l, T, self.prims, want=("point",))
+            # Points are wanted at the contour only: render without them, then take the
+            # contour's points from the depth image (the same values).
+            rr = render(cam_l, T, self.prims, want=())
             fgm = rr.label >= 0
             eroded = cv2.erode(fgm.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
             vv, uu = np.nonzero(fgm & ~eroded)
@@ -318,7 +320,7 @@ class DifferentialTracker:
                 keep = np.linspace(0, len(vv) - 1, 1500).astype(int)
                 vv, uu = vv[keep], uu[keep]
             seg = rr.label[vv, uu].astype(np.int64)
-            X = rr.point[vv, uu].astype(np.float64)
+            X = surface_points(cam_l, rr.depth, vv, uu).astype(np.float64)
             ref = se3.apply(se3.invert(T)[seg], X)
             return Term(c, seg, ref, np.zeros(len(seg)), np.ones(len(seg)),
                         self.settings.silhouette_scale / 2 ** level, "silhouette",

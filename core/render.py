@@ -1001,6 +1001,42 @@ def render(camera, seg2world, prims, *, bbox=None, want=("point", "normal")):
     return RenderResult(label, prim, depth, point, normal)
 
 
+def surface_points(camera, depth, rows, cols):
+    """World points of a render's visible surface at some pixels, from its depth image.
+
+    Equal, bit for bit, to ``render(camera, ...).point[rows, cols]`` of the render that gave
+    ``depth``, without filling the point image for every pixel (the silhouette terms want the
+    points of the contour only).
+
+    Parameters
+    ----------
+    camera : camera
+        The camera the depth image was rendered with.
+    depth : array of float32, shape (H, W)
+        ``RenderResult.depth``.
+    rows, cols : arrays of int, shape (N,)
+        Pixels on the body (finite depth).
+
+    Returns
+    -------
+    point : array of float32, shape (N, 3)
+    """
+    grid, (W, H) = _camera_grid(camera)
+    if depth.shape != (H, W):
+        raise ZoopraxisError(f"surface_points: depth has shape {depth.shape}, the camera's "
+                             f"image is ({H}, {W})")
+    flat = np.ravel_multi_index((np.asarray(rows), np.asarray(cols)), (H, W))
+    sub = grid.take(flat)
+    s = depth.reshape(-1)[flat]
+    if not grid.pinhole:
+        s = s - sub.depth0
+    # The arithmetic of _surface_geometry, pixel by pixel.
+    X = sub.d.astype(float)
+    X *= s
+    X += sub.origin[:, None] if sub.pinhole else sub.o
+    return np.ascontiguousarray(X.T.astype(np.float32))
+
+
 def render_points(camera, seg2world, prims, uv, *, want=("point", "normal")):
     """Render the body at arbitrary pixel positions (sparse sampling, particle likelihoods).
 

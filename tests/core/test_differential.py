@@ -121,6 +121,35 @@ def test_stacked_calibrated_system_equals_the_sum_over_views(body):
     assert np.isclose(cost, cost_sum, rtol=1e-12)
 
 
+def test_contour_terms_equal_the_contour_of_the_full_render(body):
+    """The contour's points come from the depth image at the contour pixels only: the same
+    pixels, segments and reference points as taking them from a render with every point."""
+    import cv2
+
+    from zoopraxis.core.render import render
+    p0, _ = two_poses(body)
+    cams = ring_of_cameras(3, 3.5, 1.3, [0, 0, 0.9], SIZE, 350)
+    tracker = D.DifferentialTracker(body, True, D.Settings())
+    state = D.State(np.stack([p0.root] * 3), p0.angles.copy(), cams)
+    for level in range(3):
+        terms = tracker.contour_terms(state, level)
+        for c, term in enumerate(terms):
+            cam = tracker._camera_at(cams[c], level)
+            T = body.seg2world(state.pose(c))
+            rr = render(cam, T, tracker.prims, want=("point",))
+            fg = (rr.label >= 0).astype(np.uint8)
+            vv, uu = np.nonzero(fg & (cv2.erode(fg, np.ones((3, 3), np.uint8)) == 0))
+            if len(vv) > 1500:
+                keep = np.linspace(0, len(vv) - 1, 1500).astype(int)
+                vv, uu = vv[keep], uu[keep]
+            seg = rr.label[vv, uu].astype(np.int64)
+            ref = se3.apply(se3.invert(T)[seg], rr.point[vv, uu].astype(np.float64))
+            order = np.argsort(seg, kind="stable")      # a Term groups its points by segment
+            assert len(seg) > 50
+            np.testing.assert_array_equal(term.segment, seg[order])
+            np.testing.assert_array_equal(term.ref_points, ref[order])
+
+
 def test_contour_once_per_frame_tracks_like_per_level(body):
     """``contour_per_level=False`` renders the contour once (finest level, start pose) and thins
     it for the coarser levels: the step still recovers the motion."""

@@ -10,7 +10,8 @@ from scipy.spatial.transform import Rotation
 from zoopraxis.core.camera import PinholeCamera, ScaledOrthoCamera, look_at
 from zoopraxis.core.errors import ZoopraxisError
 from zoopraxis.core.render import (CYLINDER, ELLIPSOID, Primitives, RenderResult, capsule,
-                                   cylinder, ellipsoid, render, render_points)
+                                   cylinder, ellipsoid, render, render_points,
+                                   surface_points)
 
 ONE_SEGMENT = np.eye(4)[None]
 
@@ -470,6 +471,27 @@ class TestRenderPoints:
         np.testing.assert_allclose(res.point, full.point[v, u], atol=1e-6)
         np.testing.assert_allclose(res.normal, full.normal[v, u], atol=1e-6)
         assert (res.label >= 0).sum() > 600
+
+    @pytest.mark.parametrize("lens", ["plain", "distorted", "orthographic"])
+    def test_surface_points_equal_the_point_image(self, rng, lens):
+        prims, seg2world = overlapping_scene()
+        if lens == "orthographic":
+            R, t = look_at((0.5, -2.0, 0.4), (0.0, 0.0, 0.0))
+            camera = ScaledOrthoCamera("o", (320, 240), 250.0, R=R, t=t)
+        else:
+            camera = pinhole(eye=(0.5, -2.0, 0.4),
+                             dist=(-0.2, 0.05, 0.001, -0.002, 0.0) if lens == "distorted"
+                             else None)
+        full = render(camera, seg2world, prims, want=("point",))
+        bare = render(camera, seg2world, prims, want=())
+        np.testing.assert_array_equal(bare.depth, full.depth)
+        vv, uu = np.nonzero(full.label >= 0)
+        pick = rng.permutation(len(vv))[:2000]
+        points = surface_points(camera, bare.depth, vv[pick], uu[pick])
+        assert points.dtype == np.float32 and points.shape == (len(pick), 3)
+        assert len(pick) > 500
+        np.testing.assert_array_equal(points, full.point[vv[pick], uu[pick]])
+        assert surface_points(camera, bare.depth, vv[:0], uu[:0]).shape == (0, 3)
 
     def test_subpixel_points_lie_on_their_rays(self, rng):
         camera = pinhole(eye=(0.0, -2.0, 0.0), dist=(-0.2, 0.05, 0.001, -0.002, 0.0))
