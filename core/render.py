@@ -22,6 +22,7 @@ world -> camera ``X_c = R @ X_w + t``; "depth" is the camera z of a surface poin
 """
 
 from collections import OrderedDict
+import math
 import threading
 from dataclasses import dataclass
 import weakref
@@ -48,6 +49,7 @@ _ORTHONORMAL_TOL = 1e-6
 # Labels and primitive indices are stored as int16 images.
 _MAX_LABEL = np.iinfo(np.int16).max
 _F32_INF = np.float32(np.inf)
+_LAST_ROW = np.array([0.0, 0.0, 0.0, 1.0])
 
 
 # ---------------------------------------------------------------------------------------------
@@ -501,9 +503,21 @@ def _world2norm(seg2world, prims):
     return norm2world, _inv_affine(norm2world)
 
 
+def _cross(a, b):
+    """Cross products of 3-vectors, shape (..., 3): the products and differences np.cross
+    computes, in the same order (the same values), without its overhead."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape), np.result_type(a, b))
+    np.subtract(a1 * b2, a2 * b1, out=out[..., 0])
+    np.subtract(a2 * b0, a0 * b2, out=out[..., 1])
+    np.subtract(a0 * b1, a1 * b0, out=out[..., 2])
+    return out
+
+
 def _det3(L):
     """Determinants of 3x3 matrices, shape (..., 3, 3) -> (...)."""
-    return np.einsum("...i,...i->...", L[..., 0], np.cross(L[..., 1], L[..., 2]))
+    return np.einsum("...i,...i->...", L[..., 0], _cross(L[..., 1], L[..., 2]))
 
 
 def _inv_affine(T):
@@ -514,13 +528,27 @@ def _inv_affine(T):
     """
     L = T[..., :3, :3]
     cols = L[..., 0], L[..., 1], L[..., 2]
-    adj = np.stack([np.cross(cols[1], cols[2]), np.cross(cols[2], cols[0]),
-                    np.cross(cols[0], cols[1])], axis=-2)
+    adj = np.stack([_cross(cols[1], cols[2]), _cross(cols[2], cols[0]),
+                    _cross(cols[0], cols[1])], axis=-2)
     inv = np.zeros_like(T)
     inv[..., :3, :3] = adj / _det3(L)[..., None, None]
     inv[..., :3, 3] = -np.einsum("...ij,...j->...i", inv[..., :3, :3], T[..., :3, 3])
     inv[..., 3, 3] = 1.0
     return inv
+
+
+def _read_only(*arrays):
+    for a in arrays:
+        a.flags.writeable = False
+    return arrays
+
+
+# The unit sphere's quadric, made once (it is asked for at every ellipsoid of every render).
+_UNIT_SPHERE = _read_only(np.ones(3, np.float32), np.zeros(3, np.float32)) + (np.float32(-1),)
+
+# Corners of the normalised bounding box of a primitive (cube [-1, 1]^3), for _prim_rects.
+_CUBE = _read_only(np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)],
+                            float))[0]
 
 
 def _quadric(kind, taper):
@@ -533,7 +561,7 @@ def _quadric(kind, taper):
     g : float32
     """
     if kind == ELLIPSOID:
-        return np.ones(3, np.float32), np.zeros(3, np.float32), np.float32(-1)
+        return _UNIT_SPHERE
     # x^2 + y^2 - (1 + k z)^2 = x^2 + y^2 - k^2 z^2 - 2 k z - 1
     k = taper - 1.0
     return (np.array([1.0, 1.0, -k * k], np.float32), np.array([0.0, 0.0, -k], np.float32),
@@ -813,7 +841,9 @@ def _check_inputs(seg2world, prims, want):
     if not np.all(np.isfinite(seg2world)):
         bad = np.flatnonzero(~np.all(np.isfinite(seg2world), axis=(1, 2)))[0]
         raise ZoopraxisError(f"render: seg2world[{bad}] has non-finite entries")
-    bad = np.flatnonzero(~np.all(np.isclose(seg2world[:, 3], (0, 0, 0, 1)), axis=1))
+    # np.isclose's test (all entries are finite here), without its overhead
+    bad = np.flatnonzero(~np.all(np.abs(seg2world[:, 3] - _LAST_ROW) <= 1e-8 + 1e-5 * _LAST_ROW,
+                                 axis=1))
     if bad.size:
         raise ZoopraxisError(f"render: seg2world[{bad[0]}] must have last row [0, 0, 0, 1]")
     dets = _det3(seg2world[:, :3, :3])
@@ -840,8 +870,7 @@ def _prim_rects(camera, norm2world, prims, pinhole):
         primitive straddling the camera plane, NaN for one wholly behind the camera.
     """
     P = len(prims)
-    cube = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
-    corners = np.broadcast_to(cube, (P, 8, 3)).copy()
+    corners = np.broadcast_to(_CUBE, (P, 8, 3)).copy()
     cyl = prims.kind == CYLINDER
     reach = np.maximum(1.0, prims.taper[cyl])
     corners[cyl, :, :2] *= reach[:, None, None]
@@ -877,6 +906,18 @@ def _window(bbox, W, H):
     return x0, y0, max(x1, x0), max(y1, y0)
 
 
+def _pixel_box(rect, window, W, H):
+    """The pixels ``(r0, r1, c0, c1)`` whose centres lie in ``rect``, within the window."""
+    u0, v0, u1, v1 = rect
+    x0, y0, x1, y1 = window
+    # Pixel i covers [i - 0.5, i + 0.5]; keep those whose centre lies in the rect.
+    c0 = max(x0, math.ceil(max(u0, -1.0)))
+    r0 = max(y0, math.ceil(max(v0, -1.0)))
+    c1 = min(x1, math.floor(min(u1, W)) + 1)
+    r1 = min(y1, math.floor(min(v1, H)) + 1)
+    return r0, r1, c0, c1
+
+
 def _cast_window(grid, rects, window, prims, world2norm, depth, prim, label, surface):
     """Cast each primitive's rays in its rectangle and keep the nearer hits, in place.
 
@@ -890,22 +931,20 @@ def _cast_window(grid, rects, window, prims, world2norm, depth, prim, label, sur
     depth, prim, label, surface : arrays, shape (H, W)
         The z-buffer, updated in place.
     """
-    x0, y0, x1, y1 = window
     H, W = depth.shape
-    for j in range(len(prims)):
-        u0, v0, u1, v1 = rects[j]
-        if np.isnan(u0):
+    # Plain Python numbers: the per-primitive bookkeeping costs as much as a small limb's rays.
+    kinds, tapers = prims.kind.tolist(), prims.taper.tolist()
+    segments = prims.segment.astype(np.int16)
+    capped = False          # whether a cap code is in ``surface`` yet (it starts all _CURVED)
+    for j, rect in enumerate(rects.tolist()):
+        if rect[0] != rect[0]:      # NaN: behind the camera
             continue
-        # Pixel i covers [i - 0.5, i + 0.5]; keep those whose centre lies in the rect.
-        c0 = max(x0, int(np.ceil(max(u0, -1.0))))
-        r0 = max(y0, int(np.ceil(max(v0, -1.0))))
-        c1 = min(x1, int(np.floor(min(u1, W))) + 1)
-        r1 = min(y1, int(np.floor(min(v1, H))) + 1)
+        r0, r1, c0, c1 = _pixel_box(rect, window, W, H)
         if c1 <= c0 or r1 <= r0:
             continue
         pixels = (slice(r0, r1), slice(c0, c1))
         rays = grid.take(pixels)
-        s, code = _intersect(rays, world2norm[j], prims.kind[j], prims.taper[j])
+        s, code = _intersect(rays, world2norm[j], kinds[j], tapers[j])
         if not grid.pinhole:
             s += rays.depth0
         s = s.reshape(r1 - r0, c1 - c0)
@@ -913,9 +952,12 @@ def _cast_window(grid, rects, window, prims, world2norm, depth, prim, label, sur
         closer = s < zbuf
         np.copyto(zbuf, s, where=closer)
         np.copyto(prim[pixels], np.int16(j), where=closer)
-        np.copyto(label[pixels], np.int16(prims.segment[j]), where=closer)
-        np.copyto(surface[pixels], _CURVED if code is None else code.reshape(s.shape),
-                  where=closer)
+        np.copyto(label[pixels], segments[j], where=closer)
+        if code is not None:
+            np.copyto(surface[pixels], code.reshape(s.shape), where=closer)
+            capped = True
+        elif capped:
+            np.copyto(surface[pixels], _CURVED, where=closer)
 
 
 def _cast_points(rays, uv, rects, prims, world2norm, depth, prim, surface):

@@ -8,6 +8,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from zoopraxis.core.camera import PinholeCamera, ScaledOrthoCamera, look_at
+from zoopraxis.core import render as render_module
 from zoopraxis.core.errors import ZoopraxisError
 from zoopraxis.core.render import (CYLINDER, ELLIPSOID, Primitives, RenderResult, capsule,
                                    cylinder, ellipsoid, render, render_points,
@@ -337,6 +338,27 @@ def overlapping_scene():
     return prims, seg2world
 
 
+class TestHelpers:
+    def test_cross_is_numpys(self, rng):
+        for shape_a, shape_b in (((7, 3), (7, 3)), ((2, 5, 3), (5, 3)), ((3,), (4, 3))):
+            a, b = rng.normal(size=shape_a), rng.normal(size=shape_b)
+            np.testing.assert_array_equal(render_module._cross(a, b), np.cross(a, b))
+        a32 = rng.normal(size=(9, 3)).astype(np.float32)
+        out = render_module._cross(a32, a32[::-1])
+        assert out.dtype == np.float32
+        np.testing.assert_array_equal(out, np.cross(a32, a32[::-1]))
+
+    def test_inverse_affine_and_determinants(self, rng):
+        T = np.zeros((6, 4, 4))
+        T[:, :3, :3] = rng.normal(size=(6, 3, 3))
+        T[:, :3, 3] = rng.normal(size=(6, 3))
+        T[:, 3, 3] = 1.0
+        np.testing.assert_allclose(render_module._inv_affine(T), np.linalg.inv(T),
+                                   rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(render_module._det3(T[:, :3, :3]),
+                                   np.linalg.det(T[:, :3, :3]), rtol=1e-12, atol=1e-12)
+
+
 class TestOcclusion:
     def test_nearer_wins_whatever_the_order(self):
         prims, seg2world = overlapping_scene()
@@ -370,6 +392,28 @@ class TestOcclusion:
         np.testing.assert_array_equal(res.label[fg], prims.segment[res.prim[fg]])
         # some pixels really are contested
         assert (np.isfinite(alone).sum(axis=0) >= 2).sum() > 1000
+
+    def test_surface_codes_follow_the_winner(self):
+        """An ellipsoid drawn over a cylinder's cap takes the pixel's surface code back to the
+        curved side: its normals are its own, not the cap's."""
+        prims = Primitives.concat([
+            cylinder(0, (0.0, 0.0, -0.3), (0.0, 0.0, 0.1), 0.2),
+            ellipsoid(1, (0.05, -0.05, 0.12), 0.12),
+            ellipsoid(2, (-0.1, -0.3, -0.1), 0.06)])
+        seg2world = np.stack([np.eye(4)] * 3)
+        camera = pinhole(eye=(0.3, -1.5, 1.2))
+        res = render(camera, seg2world, prims)
+        fg = res.label >= 0
+        for j in range(len(prims)):
+            one = Primitives(*(getattr(prims, n)[j:j + 1]
+                               for n in ("segment", "kind", "prim2seg", "size", "taper")))
+            alone = render(camera, seg2world, one)
+            won = res.prim == j
+            assert won.sum() > 100
+            np.testing.assert_allclose(res.normal[won], alone.normal[won], atol=1e-6)
+        # the cap is seen, and partly covered by the sphere drawn after it
+        cap = fg & (res.prim == 0) & (np.abs(res.normal[..., 2] - 1.0) < 1e-6)
+        assert cap.sum() > 100
 
     def test_behind_and_straddling_the_camera(self):
         camera = pinhole(eye=(0.0, -2.0, 0.0))
