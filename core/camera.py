@@ -220,6 +220,15 @@ def _distort_xy(x, y, dist, jacobian=False):
     return x_d, y_d, j_xx, j_xy, j_yy
 
 
+# Below this r^2 no term of the distortion model overflows (they are at most 3 r^2).
+_R2_PLAIN = 1e300
+
+
+def _no_distortion(dist):
+    """Whether all five coefficients are +0.0 (not -0.0, which changes the signs of zeros)."""
+    return not dist.any() and not np.signbit(dist).any()
+
+
 def _distort(xy, dist, jacobian=False):
     """Apply lens distortion to normalized coordinates.
 
@@ -242,6 +251,14 @@ def _distort(xy, dist, jacobian=False):
     J : array, shape (..., 2, 2)
         Only if ``jacobian``.
     """
+    if not jacobian and _no_distortion(dist):
+        x, y = xy[..., 0], xy[..., 1]
+        r2 = x * x
+        r2 += y * y
+        if np.all(r2 < _R2_PLAIN):
+            # With all coefficients +0 and r^2 finite, the model's sums are x + (+0) and
+            # y + (+0) exactly (the +0 terms only turn -0 into +0): the same values.
+            return xy + 0.0
     out = _distort_xy(xy[..., 0], xy[..., 1], dist, jacobian)
     xy_d = np.stack(out[:2], axis=-1)
     if not jacobian:

@@ -406,3 +406,40 @@ def test_pinhole_dict_is_designs_format():
     entry = make_pinhole(LENS).to_dict()
     assert set(entry) == {"name", "image_size", "K", "dist", "R", "t"}
     assert entry["dist"] == LENS and len(entry["K"]) == 3
+
+
+@pytest.mark.parametrize("dist", [None, [0.0, -0.0, 0.0, 0.0, 0.0]])
+def test_projection_without_distortion_equals_the_full_model(dist, rng):
+    """Zero coefficients skip the distortion polynomial: the pixels are the model's to the
+    bit, signs of zero and the non-finite pixels of points on the camera plane included."""
+    cam = make_pinhole(dist)
+    X_cam = np.concatenate([rng.normal(0, 1, (200, 3)) + [0, 0, 3],
+                            [[0.0, 0.0, 2.0], [-0.0, 0.5, 1.0], [0.5, -0.0, 1.0],
+                             [1.0, 1.0, 0.0], [0.0, 0.0, 0.0], [1e160, 1.0, 1.0],
+                             [1.0, -1.0, -2.0]]])
+    X = cam.world_from_cam(X_cam)
+    X_cam = cam.cam_from_world(X)
+    with np.errstate(all="ignore"):
+        xy = X_cam[:, :2] / X_cam[:, 2:]
+        x_d, y_d = camera._distort_xy(xy[:, 0], xy[:, 1], cam.dist)
+        expected = cam._pixels_from_normalized(np.stack([x_d, y_d], axis=-1))
+        uv = cam.project(X)
+    assert np.array_equal(np.isnan(uv), np.isnan(expected))
+    assert np.isfinite(uv).sum() >= 400
+    ok = ~np.isnan(expected)
+    assert np.array_equal(uv[ok].view(np.int64), expected[ok].view(np.int64))
+    # the normalised coordinates themselves, signed zeros and non-finite ones included
+    xy = np.concatenate([xy, [[np.inf, 0.0], [0.0, -np.inf], [np.nan, 1.0], [1e200, 1.0],
+                              [-0.0, -0.0], [-0.0, 2.0]]])
+    with np.errstate(all="ignore"):
+        x_d, y_d = camera._distort_xy(xy[:, 0], xy[:, 1], cam.dist)
+        plain = camera._distort(xy, cam.dist)
+    both = np.stack([x_d, y_d], axis=-1)
+    fin = ~np.isnan(both)
+    assert np.array_equal(np.isnan(plain), ~fin)
+    assert np.array_equal(plain[fin].view(np.int64), both[fin].view(np.int64))
+    # finite coordinates alone (the shortcut, when the coefficients are all +0)
+    finite = np.all(np.abs(xy) < 1e100, axis=1)
+    assert np.array_equal(camera._distort(xy[finite], cam.dist).view(np.int64),
+                          both[finite].view(np.int64))
+    assert (xy[finite] == 0).any() and np.signbit(xy[finite][xy[finite] == 0]).any()
