@@ -21,6 +21,7 @@ own scaled-orthographic pose of the body and share the joint angles (B&M eq. 28)
 """
 
 import os
+from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import cv2
@@ -257,6 +258,22 @@ class DifferentialTracker:
         self._scaled[key] = (camera, scaled)
         return scaled
 
+    def _seg2world(self, state, c):
+        """``body.seg2world(state.pose(c))``, remembered for the last few poses: calibrated
+        views share one pose, and the anchor's visibility, the contours, the templates and
+        the renders of a frame ask for the same poses again. Read-only; the same values."""
+        root, angles = state.roots[c], state.angles
+        key = (root.tobytes(), angles.tobytes(), angles.shape)
+        cache = self.__dict__.setdefault("_seg2world_cache", OrderedDict())
+        T = cache.get(key)
+        if T is None:
+            T = self.body.seg2world(state.pose(c))
+            T.flags.writeable = False
+            cache[key] = T
+            while len(cache) > 8:
+                cache.popitem(last=False)
+        return T
+
     def template_terms(self, state, images_t, renders):
         """Image-motion terms from the rendered model at frame t, per view and level.
 
@@ -266,7 +283,7 @@ class DifferentialTracker:
         """
         s = self.settings
         out = []
-        seg2world = [self.body.seg2world(state.pose(c)) for c in range(len(images_t))]
+        seg2world = [self._seg2world(state, c) for c in range(len(images_t))]
         world2seg = [se3.invert(T) for T in seg2world]
         for level in range(s.levels):
             if level < min(s.finest, s.levels - 1):
@@ -309,7 +326,7 @@ class DifferentialTracker:
         """
         def one(c):
             cam_l = self._camera_at(state.cameras[c], level)
-            T = self.body.seg2world(state.pose(c))
+            T = self._seg2world(state, c)
             # Points are wanted at the contour only: render without them, then take the
             # contour's points from the depth image (the same values).
             rr = render(cam_l, T, self.prims, want=())
@@ -355,8 +372,7 @@ class DifferentialTracker:
 
     def render_views(self, state, want=("point",)):
         def one(c):
-            return render(state.cameras[c], self.body.seg2world(state.pose(c)), self.prims,
-                          want=want)
+            return render(state.cameras[c], self._seg2world(state, c), self.prims, want=want)
 
         return self.map_views(one, len(state.cameras))
 
@@ -372,7 +388,16 @@ class DifferentialTracker:
         """Anchor points still visible at the current pose (depth test against the render)."""
         c = term.view
         cam = self._camera_at(state.cameras[c], level)
-        X = se3.apply(self.body.seg2world(state.pose(c))[term.segment], term.ref_points)
+        # A frame whose step runs twice (a limb search's refit) asks again with the same
+        # frame-t pose and renders: answer from the last time.
+        seen = self.__dict__.setdefault("_visible_cache", {})
+        key = (id(term), level)
+        pose = (state.roots[c].tobytes(), state.angles.tobytes())
+        hit = seen.get(key)
+        if hit is not None and hit[0] is term and hit[1] is renders[c] and hit[2] is cam \
+                and hit[3] == pose:
+            return hit[4].copy()
+        X = se3.apply(self._seg2world(state, c)[term.segment], term.ref_points)
         uv = cam.project(X)
         scale = 2 ** level
         u = np.rint(uv[:, 0] * scale).astype(int)
@@ -381,7 +406,11 @@ class DifferentialTracker:
         ok = (u >= 0) & (u < w) & (v >= 0) & (v < h)
         lab = np.full(len(u), -1)
         lab[ok] = renders[c].label[v[ok], u[ok]]
-        return ok & (lab == term.segment)
+        visible = ok & (lab == term.segment)
+        if len(seen) > 64:
+            seen.clear()
+        seen[key] = (term, renders[c], cam, pose, visible.copy())
+        return visible
 
     def _system(self, state, level, terms_by_view, images, em_weights):
         """Total normal equations over views and terms at ``state``.

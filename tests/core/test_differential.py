@@ -150,6 +150,44 @@ def test_contour_terms_equal_the_contour_of_the_full_render(body):
             np.testing.assert_array_equal(term.ref_points, ref[order])
 
 
+def test_remembered_poses_and_visibility_are_the_computed_ones(body):
+    """The tracker's memo of segment transforms per pose and of the anchor's visibility per
+    frame answer what computing them afresh gives, and notice a changed pose."""
+    p0, p1 = two_poses(body)
+    cams = ring_of_cameras(3, 3.5, 1.3, [0, 0, 0.9], SIZE, 350)
+    frames = model_plates(body, [p0], cams)
+    settings = D.Settings()
+    tracker = D.DifferentialTracker(body, True, settings)
+    state = D.State(np.stack([p0.root] * 3), p0.angles.copy(), cams)
+    other = D.State(np.stack([p1.root] * 3), p1.angles.copy(), cams)
+    for st in (state, other, state):
+        for c in range(3):
+            T = tracker._seg2world(st, c)
+            assert not T.flags.writeable
+            np.testing.assert_array_equal(T, body.seg2world(st.pose(c)))
+    ims = prepared(frames[0], settings, True)
+    renders = tracker.render_views(state)
+    tracker.set_anchor(state, ims, renders)
+    moved = tracker.retract(state, np.r_[[0.02, 0, 0, 0, 0, 0.2], np.zeros(body.n_dofs)])
+    for st in (state, moved, state, moved):
+        for level in range(settings.levels):
+            for term in tracker.anchor_terms[level]:
+                c = term.view
+                cam = tracker._camera_at(st.cameras[c], level)
+                X = se3.apply(body.seg2world(st.pose(c))[term.segment], term.ref_points)
+                uv = cam.project(X) * 2 ** level
+                u, v = np.rint(uv).astype(int).T
+                h, w = renders[c].label.shape
+                inside = (u >= 0) & (u < w) & (v >= 0) & (v < h)
+                expected = np.zeros(len(u), bool)
+                expected[inside] = renders[c].label[v[inside], u[inside]] \
+                    == term.segment[inside]
+                got = tracker._visible(term, st, level, renders)
+                np.testing.assert_array_equal(got, expected)
+                got[:] = False          # the caller's copy: the memo keeps its own
+                assert expected.sum() > 0.3 * len(u)
+
+
 def test_contour_once_per_frame_tracks_like_per_level(body):
     """``contour_per_level=False`` renders the contour once (finest level, start pose) and thins
     it for the coarser levels: the step still recovers the motion."""
