@@ -163,6 +163,27 @@ class StepReport:
     unexplained: np.ndarray = None  # (V,) thick foreground blobs the model misses / model area
 
 
+def _contour_pixels(mask):
+    """Rows and columns of the mask's pixels with a 3x3 neighbour off the mask (the image's
+    edge counts as on it), in row-major order: ``np.nonzero(mask & ~cv2.erode(mask))``,
+    worked out on the mask's bounding box grown by a pixel rather than on the whole image."""
+    rows = np.flatnonzero(mask.any(axis=1))
+    if rows.size == 0:
+        return np.nonzero(np.zeros((0, 0), bool))
+    cols = np.flatnonzero(mask.any(axis=0))
+    H, W = mask.shape
+    r0, r1 = max(rows[0] - 1, 0), min(rows[-1] + 2, H)
+    c0, c1 = max(cols[0] - 1, 0), min(cols[-1] + 2, W)
+    box = mask[r0:r1, c0:c1]
+    # Inside the image the box's outer ring is off the mask, as in the whole image; at the
+    # image's edge both erode with the same border.
+    eroded = cv2.erode(box.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+    vv, uu = np.nonzero(box & ~eroded)
+    vv += r0
+    uu += c0
+    return vv, uu
+
+
 class DifferentialTracker:
     """Gauss-Newton tracker over a body model and a set of views.
 
@@ -330,9 +351,7 @@ class DifferentialTracker:
             # Points are wanted at the contour only: render without them, then take the
             # contour's points from the depth image (the same values).
             rr = render(cam_l, T, self.prims, want=())
-            fgm = rr.label >= 0
-            eroded = cv2.erode(fgm.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
-            vv, uu = np.nonzero(fgm & ~eroded)
+            vv, uu = _contour_pixels(rr.label >= 0)
             if len(vv) > 1500:
                 keep = np.linspace(0, len(vv) - 1, 1500).astype(int)
                 vv, uu = vv[keep], uu[keep]

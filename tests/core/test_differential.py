@@ -150,6 +150,25 @@ def test_contour_terms_equal_the_contour_of_the_full_render(body):
             np.testing.assert_array_equal(term.ref_points, ref[order])
 
 
+def test_contour_pixels_equal_those_of_the_whole_image():
+    import cv2
+    rng = np.random.default_rng(3)
+    kernel = np.ones((3, 3), np.uint8)
+    masks = [np.zeros((40, 50), bool), np.ones((40, 50), bool)]
+    for _ in range(40):
+        m = np.zeros((40, 50), bool)
+        r0, c0 = rng.integers(0, 40), rng.integers(0, 50)
+        m[r0:r0 + rng.integers(1, 30), c0:c0 + rng.integers(1, 30)] = True
+        m &= rng.uniform(size=m.shape) < rng.choice([0.6, 1.0])      # holes, specks
+        masks.append(m)
+    for m in masks:
+        ref = np.nonzero(m & ~(cv2.erode(m.astype(np.uint8), kernel) > 0))
+        got = D._contour_pixels(m)
+        for a, b in zip(got, ref):
+            assert a.dtype == b.dtype
+            np.testing.assert_array_equal(a, b)
+
+
 def test_remembered_poses_and_visibility_are_the_computed_ones(body):
     """The tracker's memo of segment transforms per pose and of the anchor's visibility per
     frame answer what computing them afresh gives, and notice a changed pose."""
