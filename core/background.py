@@ -67,6 +67,52 @@ def _as_float(frame):
     return frame
 
 
+def _sorting_network(n):
+    """Compare-exchange pairs ``(i, j)``, ``i < j``, of Batcher's odd-even merge sort of n items."""
+    pairs = []
+    p = 1
+    while p < n:
+        k = p
+        while k >= 1:
+            for j in range(k % p, n - k, 2 * k):
+                for i in range(min(k, n - j - k)):
+                    if (i + j) // (2 * p) == (i + j + k) // (2 * p):
+                        pairs.append((i + j, i + j + k))
+            k //= 2
+        p *= 2
+    return pairs
+
+
+def _median_network(n):
+    """The pairs of :func:`_sorting_network` that the middle item(s) depend on, in order."""
+    wanted = {(n - 1) // 2, n // 2}
+    kept = []
+    for i, j in reversed(_sorting_network(n)):
+        if i in wanted or j in wanted:
+            kept.append((i, j))
+            wanted |= {i, j}
+    return kept[::-1]
+
+
+def _median_over_frames(stack):
+    """``np.median(stack, axis=0)``, the same values.
+
+    numpy selects the median of each of the H*W*3 lanes separately, a call per lane; a sorting
+    network over the N frames does the selection with whole-image minima and maxima. The middle
+    sample (or the mean of the middle two, by np.mean as np.median takes it) is the same value
+    whichever way it is selected. NaNs and negative numbers (signed zeros) go to np.median.
+    """
+    n = len(stack)
+    if n < 3 or np.isnan(stack).any() or np.signbit(stack).any():
+        return np.median(stack, axis=0)
+    items = list(stack.copy())
+    for i, j in _median_network(n):
+        low = np.minimum(items[i], items[j])
+        np.maximum(items[i], items[j], out=items[j])
+        items[i] = low
+    return np.mean(np.stack(items[(n - 1) // 2:n // 2 + 1]), axis=0)
+
+
 def estimate_background(frames, *, tolerance=None, exclude=()):
     """Background of a static view from frames spread over the take.
 
@@ -92,7 +138,7 @@ def estimate_background(frames, *, tolerance=None, exclude=()):
     """
     stack = np.stack([_as_float(f) for f in frames])                 # (N, H, W, 3)
     N, H, W, _ = stack.shape
-    median = np.median(stack, axis=0)
+    median = _median_over_frames(stack)
     noise = float(1.4826 * np.median(np.sqrt(((stack[::3] - median) ** 2).sum(axis=3)))) + 1e-3
     tol = max(4.0 * noise, 0.05) if tolerance is None else tolerance
     tol2 = np.float32(tol * tol)
@@ -112,11 +158,19 @@ def estimate_background(frames, *, tolerance=None, exclude=()):
     if exclude:
         person_s = np.stack([cv2.resize(p.astype(np.uint8), (small.shape[2], small.shape[1]),
                                         interpolation=cv2.INTER_NEAREST) > 0 for p in person])
+    # How many samples agree with each one. Agreement is symmetric (the distance of a pair is
+    # the same either way round, to the bit), so each pair is measured once and counted for
+    # both of its samples, each time if the other one is not the person's.
+    free = ~person_s
+    agree = np.zeros(small.shape[:3], np.int64)
+    for i in range(N):
+        close = dist2(small[i:], small[i]) < tol2            # samples i, i+1, ... against i
+        agree[i] += (close & free[i:]).sum(axis=0)
+        agree[i + 1:] += close[1:] & free[i]
     best_count = np.zeros(small.shape[1:3], np.int32)
     best_index = np.zeros(small.shape[1:3], np.int64)
     for i in range(N):
-        close = (dist2(small, small[i]) < tol2) & ~person_s
-        count = np.where(person_s[i], 0, close.sum(axis=0))
+        count = np.where(person_s[i], 0, agree[i])
         better = count > best_count
         best_count[better] = count[better]
         best_index[better] = i
