@@ -170,6 +170,31 @@ def _as_points(X, last):
     return X
 
 
+# From this many rows on, elementwise work on (..., k) points goes column by column: numpy's
+# broadcast loops over k-long rows cost several times more per element.
+_BY_COLUMNS = 1000
+
+
+def _plus_row(P, v):
+    """``P + v`` for points ``P`` (..., k) and one vector ``v`` (k,): the same sums."""
+    if P.size < _BY_COLUMNS * P.shape[-1]:
+        return P + v
+    out = np.empty(P.shape, np.result_type(P, v))
+    for i in range(P.shape[-1]):
+        np.add(P[..., i], v[i], out=out[..., i])
+    return out
+
+
+def _perspective_divide(X_cam):
+    """``X_cam[..., :2] / X_cam[..., 2:]``, the same quotients (call under np.errstate)."""
+    if X_cam.size < _BY_COLUMNS * 3:
+        return X_cam[..., :2] / X_cam[..., 2:]
+    xy = np.empty(X_cam.shape[:-1] + (2,), np.result_type(X_cam))
+    np.divide(X_cam[..., 0], X_cam[..., 2], out=xy[..., 0])
+    np.divide(X_cam[..., 1], X_cam[..., 2], out=xy[..., 1])
+    return xy
+
+
 def _pixel_grid(image_size):
     """Pixel centres of a whole image, shape (H, W, 2), as (u, v)."""
     width, height = image_size
@@ -353,7 +378,7 @@ class _Camera:
         -------
         X_cam : array, shape (..., 3)
         """
-        return _as_points(X, 3) @ self.R.T + self.t
+        return _plus_row(_as_points(X, 3) @ self.R.T, self.t)
 
     def world_from_cam(self, X_cam):
         """Transform camera-frame points into the world, the inverse of ``cam_from_world``.
@@ -503,7 +528,7 @@ class PinholeCamera(_Camera):
         return bool(np.any(self.dist))
 
     def _pixels_from_normalized(self, xy):
-        return xy @ self.K[:2, :2].T + self.K[:2, 2]
+        return _plus_row(xy @ self.K[:2, :2].T, self.K[:2, 2])
 
     def _normalized_from_pixels(self, uv):
         K = self.K
@@ -529,7 +554,7 @@ class PinholeCamera(_Camera):
         """
         X_cam = self.cam_from_world(X)
         with np.errstate(divide="ignore", invalid="ignore"):
-            xy = X_cam[..., :2] / X_cam[..., 2:]
+            xy = _perspective_divide(X_cam)
         return self._pixels_from_normalized(_distort(xy, self.dist))
 
     def project_jacobian(self, X):

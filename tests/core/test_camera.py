@@ -443,3 +443,28 @@ def test_projection_without_distortion_equals_the_full_model(dist, rng):
     assert np.array_equal(camera._distort(xy[finite], cam.dist).view(np.int64),
                           both[finite].view(np.int64))
     assert (xy[finite] == 0).any() and np.signbit(xy[finite][xy[finite] == 0]).any()
+
+
+@pytest.mark.parametrize("shape", [(5,), (50, 3), (4000,), (3, 900), (2, 3, 700)])
+def test_large_point_sets_project_to_the_same_bits(shape, rng):
+    """Many points go column by column through the rigid transform, the perspective divide and
+    the intrinsics: the same sums and quotients as the broadcast expressions."""
+    cam = make_pinhole()
+    X = points_in_view(rng, int(np.prod(shape))).reshape(shape + (3,))
+    X[..., 0, :] = cam.center + [0.1, 0.0, 0.0]          # on the camera plane: inf or nan
+    X_cam = X @ cam.R.T + cam.t
+    got_cam = cam.cam_from_world(X)
+    assert got_cam.shape == X.shape
+    assert np.array_equal(got_cam.view(np.int64), X_cam.view(np.int64))
+    with np.errstate(all="ignore"):
+        xy = X_cam[..., :2] / X_cam[..., 2:]
+        uv = cam.project(X)
+    expected = camera._distort(xy, cam.dist) @ cam.K[:2, :2].T + cam.K[:2, 2]
+    assert uv.shape == shape + (2,)
+    fin = ~np.isnan(expected)
+    assert np.array_equal(np.isnan(uv), ~fin)
+    assert np.array_equal(uv[fin].view(np.int64), expected[fin].view(np.int64))
+    # a strided (non-contiguous) input
+    Xs = np.concatenate([X, X], axis=-1)[..., ::2][..., :3]
+    assert np.array_equal(cam.cam_from_world(Xs).view(np.int64),
+                          (Xs @ cam.R.T + cam.t).view(np.int64))
