@@ -275,7 +275,8 @@ def finetune_cases(table, frames, rng):
             table.add(case, f"MPJPE mm, {when}",
                       1000 * np.linalg.norm(res.joints3d - joints, axis=2).mean(axis=1))
         m = out.measures
-        table.add(case, f"re-track kept (IoU {m['before']['iou']:.3f} -> "
+        table.add(case, f"re-track kept (residual {m['before']['residual']:.2f} -> "
+                        f"{m['after']['residual']:.2f}, IoU {m['before']['iou']:.3f} -> "
                         f"{m['after']['iou']:.3f}, lost {m['before']['lost']} -> "
                         f"{m['after']['lost']})", [float(out.kept)])
         table.add(case, "time s (track, fit, re-track)", [secs])

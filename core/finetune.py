@@ -416,14 +416,23 @@ def track_measures(result):
 
 def is_better(after, before):
     """Whether a re-track is better than the first by the tracker's measures: no more frames
-    lost, no more frames lost or uncertain together, and a higher silhouette overlap (or, with
-    no silhouettes, a lower grey residual)."""
+    lost, no more frames lost or uncertain together, and a lower grey residual (or, with no
+    residuals, a higher silhouette overlap).
+
+    The grey residual is how well the model's motion explains the images: a limb of the
+    wrong length carries points that do not move with the person. The silhouette overlap
+    is a poor judge of lengths: where the person's outline is larger than the model's (another
+    build, clothes), longer limbs overlap more. On twelve benchmark re-tracks (three CMU walks,
+    lengths 8 % short, right or 9 % long, estimated and clean backgrounds) the overlap rule
+    kept the re-track in 2 of the 9 where it helped; this rule in 7 of the 9, and rejected 2
+    of the 3 that were worse (the third: 0.8 mm worse).
+    """
     if after["lost"] > before["lost"] or \
             after["lost"] + after["uncertain"] > before["lost"] + before["uncertain"]:
         return False
-    if np.isfinite(after["iou"]) and np.isfinite(before["iou"]):
-        return after["iou"] > before["iou"]
-    return after["residual"] < before["residual"]
+    if np.isfinite(after["residual"]) and np.isfinite(before["residual"]):
+        return after["residual"] < before["residual"]
+    return after["iou"] > before["iou"]
 
 
 def _sample_frames(result, n):
@@ -605,7 +614,8 @@ def finetune(plates, anchors, cameras, *, result=None, init=None, frames=None, o
         return finish(first, second, body1, False, fit=fit, cancelled=True)
     after = track_measures(second)
     kept = is_better(after, before)
-    say(f"fine-tune: silhouette overlap {before['iou']:.3f} -> {after['iou']:.3f}, lost "
+    say(f"fine-tune: grey residual {before['residual']:.2f} -> {after['residual']:.2f}, "
+        f"silhouette overlap {before['iou']:.3f} -> {after['iou']:.3f}, lost "
         f"{before['lost']} -> {after['lost']}, uncertain {before['uncertain']} -> "
         f"{after['uncertain']}: {'keeping the re-track' if kept else 'keeping the first track'}")
     return finish(second if kept else first, second, body1, kept, after, fit)

@@ -124,3 +124,18 @@ def test_bad_input(take):
         FT.finetune(synth.scene_plates(scene), anchors, {"cam0": cams["cam0"]})
     with pytest.raises(ZoopraxisError, match="2 frames x 2 views"):
         FT.fit_body_to_images(wrong, [start, start], list(cams.values()), [[None, None]])
+
+
+def test_keep_rule_judges_by_the_grey_residual():
+    before = {"iou": 0.49, "fit": 0.64, "residual": 3.03, "ok": 2, "uncertain": 7, "lost": 11}
+    # lengths fixed: the appearance is explained better though longer limbs overlapped more
+    after = {**before, "iou": 0.485, "residual": 2.94, "uncertain": 8, "lost": 10}
+    assert FT.is_better(after, before)
+    assert not FT.is_better({**after, "residual": 3.1}, before)
+    # never more frames lost, nor more lost and uncertain together
+    assert not FT.is_better({**after, "lost": 12, "uncertain": 5}, before)
+    assert not FT.is_better({**after, "uncertain": 9}, before)
+    # without residuals the overlap decides
+    nan = float("nan")
+    assert FT.is_better({**after, "residual": nan, "iou": 0.5}, {**before, "residual": nan})
+    assert not FT.is_better({**after, "residual": nan}, {**before, "residual": nan})
