@@ -21,6 +21,7 @@ Convention: model points are stored in the body *reference* frame of their segme
 :mod:`body`), so the world point at a pose is ``seg2world[segment] @ point``.
 """
 
+import threading
 from dataclasses import dataclass
 
 import cv2
@@ -189,8 +190,9 @@ class _Pullback:
         self.fn = fn
         self.depth = depth
 
-    def __call__(self, grad):
-        return self.fn(grad)
+    def __call__(self, grad, out=None):
+        """World gradients of image gradients ``grad`` (N, 2), written to ``out`` if given."""
+        return self.fn(grad, out)
 
 
 def _projection(camera, X):
@@ -200,7 +202,10 @@ def _projection(camera, X):
     distortion ``d uv / d X = K_2x2 [[1/z, 0, -x/z^2], [0, 1/z, -y/z^2]] R``.
     """
     R = camera.R
-    Xc = X @ R.T + camera.t
+    Xc = X @ R.T
+    t = camera.t
+    for j in range(3):          # the same sums as ``+ t``, without a loop over 3-long rows
+        Xc[:, j] += t[j]
     if hasattr(camera, "K") and not getattr(camera, "has_distortion", True):
         K = camera.K
         z = Xc[:, 2]
@@ -211,7 +216,7 @@ def _projection(camera, X):
         uv[:, 0] = fx * x + skew * y + cx
         uv[:, 1] = fy * y + cy
 
-        def pull(grad):
+        def pull(grad, out=None):
             g0, g1 = grad[:, 0], grad[:, 1]
             gu = g0 * fx
             gv = g0 * skew + g1 * fy
@@ -223,19 +228,20 @@ def _projection(camera, X):
             gu += gv
             gu *= inv_z
             np.negative(gu, out=gc[:, 2])
-            return gc @ R
+            return np.matmul(gc, R, out=out)
 
         return uv, _Pullback(pull, z)
     if not hasattr(camera, "K"):
         s = camera.s
         uv = s * Xc[:, :2] + camera.c
 
-        def pull(grad):
-            return (s * grad) @ R[:2]
+        def pull(grad, out=None):
+            return np.matmul(s * grad, R[:2], out=out)
 
         return uv, _Pullback(pull, Xc[:, 2])
     uv, Jp = camera.project_jacobian(X)
-    return uv, _Pullback(lambda grad: np.einsum("ni,nij->nj", grad, Jp), Xc[:, 2])
+    return uv, _Pullback(lambda grad, out=None: np.einsum("ni,nij->nj", grad, Jp, out=out),
+                         Xc[:, 2])
 
 
 @dataclass
@@ -328,6 +334,60 @@ class Stack:
         self.hinge = np.concatenate([np.full(len(t), t.hinge if t.hinge is not None else 0.0)
                                      for t in parts])
         self.any_hinge = any(hinged)
+        self.scale2 = self.scale * self.scale
+        self._part_weights = (None, None)
+
+    def part_weights(self, weights):
+        """Each point's part weight, ``np.repeat(weights, part sizes)`` (kept for the last
+        weights asked for)."""
+        key = tuple(float(x) for x in weights)
+        if self._part_weights[0] != key:
+            self._part_weights = (key, np.repeat(np.asarray(weights, float),
+                                                 np.diff(self.bounds)))
+        return self._part_weights[1]
+
+
+class _Workspace(threading.local):
+    """Work arrays of :func:`accumulate_stacked`, kept between calls (per thread).
+
+    A fresh array of a few hundred kilobytes comes from the system as untouched pages (the
+    allocator hands large blocks back when they are freed), and touching them costs as much
+    as the arithmetic: the same buffers are reused instead. Their contents are undefined, and
+    nothing that leaves :func:`accumulate_stacked` lives in them.
+    """
+
+    def __init__(self):
+        self.buffers = {}
+
+    def get(self, name, n, width=1, dtype=np.float64):
+        """A C-contiguous work array of shape (n,) or (n, width)."""
+        key = (name, width, np.dtype(dtype).char)
+        buf = self.buffers.get(key)
+        size = n * width
+        if buf is None or buf.size < size:
+            buf = self.buffers[key] = np.empty(size + size // 4 + 1024, dtype)
+        view = buf[:size]
+        return view if width == 1 and name not in _WIDE else view.reshape(n, width)
+
+
+_WIDE = frozenset(("X", "Xs", "vals", "grad", "gp", "gp_sorted", "G", "GW"))
+_WORKSPACE = _Workspace()
+
+
+def _workspace():
+    return _WORKSPACE
+
+
+def _camera_runs(bounds, cameras):
+    """Runs of consecutive parts with the same camera object: ``(lo, hi, first, last)``
+    with the runs' point range and parts ``first`` to ``last - 1``."""
+    runs = []
+    first = 0
+    for i in range(1, len(cameras) + 1):
+        if i == len(cameras) or cameras[i] is not cameras[first]:
+            runs.append((int(bounds[first]), int(bounds[i]), first, i))
+            first = i
+    return runs
 
 
 def accumulate_stacked(stack_terms, images, cameras, weights, seg2world, n_segments, *,
@@ -365,61 +425,79 @@ def accumulate_stacked(stack_terms, images, cameras, weights, seg2world, n_segme
     """
     st = stack_terms
     bounds = st.bounds
-    n = bounds[-1]
+    n = int(bounds[-1])
+    work = _workspace()
     # world points of all parts: one product per segment, then back to the parts' order
-    Xs = np.empty((n, 3))
+    Xs = work.get("Xs", n, 3)
     for k, lo, hi in st.groups:
         T = seg2world[k]
         np.matmul(st.ref_sorted[lo:hi], T[:3, :3].T, out=Xs[lo:hi])
         Xs[lo:hi] += T[:3, 3]
-    X = np.take(Xs, st.unorder, axis=0)       # np.take gathers rows several times faster
-    vals = np.empty((n, 3), np.float32)
+    X = np.take(Xs, st.unorder, axis=0, out=work.get("X", n, 3), mode="clip")
+    vals = work.get("vals", n, 3, np.float32)
     inside = np.empty(n, bool)
     pulls = []
     centred = np.empty((n, 2)) if with_scale else None     # pixels about the scale's centre
-    for i in range(len(st.parts)):
-        lo, hi = bounds[i], bounds[i + 1]
-        uv, pullback = _projection(cameras[i], X[lo:hi])
-        vals[lo:hi], inside[lo:hi] = sample_fast(images[i], uv)
-        if hasattr(cameras[i], "K"):
+    # Consecutive parts seen by the same camera object (a view's flow and silhouette terms)
+    # are projected together, and each part samples its own image from the shared pixels:
+    # the projection is row by row, so the pixels are the same as part by part.
+    for lo, hi, first, last in _camera_runs(bounds, cameras):
+        camera = cameras[first]
+        uv, pullback = _projection(camera, X[lo:hi])
+        for i in range(first, last):
+            a, z = bounds[i], bounds[i + 1]
+            vals[a:z], inside[a:z] = sample_fast(images[i], uv[a - lo:z - lo])
+        if hasattr(camera, "K"):
             inside[lo:hi] &= pullback.depth > 1e-3
         if with_scale:
-            centred[lo:hi] = uv - cameras[i].c
-        pulls.append(pullback)
+            centred[lo:hi] = uv - camera.c
+        pulls.append((lo, hi, pullback))
     r = vals[:, 0].astype(np.float64)
     r -= st.target
-    grad = vals[:, 1:3].astype(np.float64)
+    grad = work.get("grad", n, 2)
+    np.copyto(grad, vals[:, 1:3])
     if st.any_hinge:
         r -= st.hinge
         off = st.hinged & (r <= 0)
         r[off] = 0.0
         grad[off] = 0.0
-    part_w = np.repeat(np.asarray(weights, float), np.diff(bounds))
-    base = st.weight * inside
+    part_w = st.part_weights(weights)
+    base = np.multiply(st.weight, inside, out=work.get("base", n))
     w = base
     if extra_weights is not None and any(e is not None for e in extra_weights):
-        w = base * np.concatenate([np.ones(bounds[i + 1] - bounds[i]) if e is None else e
-                                   for i, e in enumerate(extra_weights)])
-    r2 = r * r
+        ew = work.get("extra", n)
+        for i, e in enumerate(extra_weights):
+            ew[bounds[i]:bounds[i + 1]] = 1.0 if e is None else e
+        w = np.multiply(base, ew, out=ew)
+    r2 = np.multiply(r, r, out=work.get("r2", n))
     if robust:
-        rho = r2 / (r2 + st.scale * st.scale)
-        w = w * geman_mcclure_weights(r, st.scale)
+        # rho = r^2 / (r^2 + s^2) and the Geman-McClure weights (s^2 / (r^2 + s^2))^2
+        # (geman_mcclure_weights), sharing r^2 + s^2
+        s2 = st.scale2
+        den = np.add(r2, s2, out=work.get("den", n))
+        rho = np.divide(r2, den, out=work.get("rho", n))
+        gm = np.divide(s2, den, out=den)
+        np.square(gm, out=gm)
+        w = np.multiply(w, gm, out=work.get("w", n))
     else:
         rho = r2
-    brho = base * rho
+    brho = np.multiply(base, rho, out=work.get("brho", n))
     # The rows g_i = [world gradient, X x world gradient] go straight into segment order:
     # only the world gradients are gathered, the points are already sorted (Xs).
-    gp = np.empty((n, 3))
-    for i, pull in enumerate(pulls):
-        lo, hi = bounds[i], bounds[i + 1]
-        gp[lo:hi] = pull(grad[lo:hi])
+    gp = work.get("gp", n, 3)
+    for lo, hi, pull in pulls:
+        pull(grad[lo:hi], out=gp[lo:hi])
     order = st.order
-    gp = np.take(gp, order, axis=0)
-    G = np.empty((n, 7 if with_scale else 6))
+    gp = np.take(gp, order, axis=0, out=work.get("gp_sorted", n, 3), mode="clip")
+    m = 7 if with_scale else 6
+    G = work.get("G", n, m)
     G[:, :3] = gp
-    G[:, 3] = Xs[:, 1] * gp[:, 2] - Xs[:, 2] * gp[:, 1]
-    G[:, 4] = Xs[:, 2] * gp[:, 0] - Xs[:, 0] * gp[:, 2]
-    G[:, 5] = Xs[:, 0] * gp[:, 1] - Xs[:, 1] * gp[:, 0]
+    t1, t2 = work.get("t1", n), work.get("t2", n)
+    for col, (i, j) in ((3, (1, 2)), (4, (2, 0)), (5, (0, 1))):
+        # (X x gradient)_col = X_i g_j - X_j g_i
+        np.multiply(Xs[:, i], gp[:, j], out=t1)
+        np.multiply(Xs[:, j], gp[:, i], out=t2)
+        np.subtract(t1, t2, out=G[:, col])
     if with_scale:
         G[:, 6] = np.take(grad[:, 0] * centred[:, 0] + grad[:, 1] * centred[:, 1], order)
     out = []
@@ -427,12 +505,14 @@ def accumulate_stacked(stack_terms, images, cameras, weights, seg2world, n_segme
         lo, hi = bounds[i], bounds[i + 1]
         out.append(Accumulated(None, None, float(brho[lo:hi].sum()), float(w[lo:hi].sum()),
                                r[lo:hi], inside[lo:hi]))
-    W = part_w * w
-    R, W = np.take(r, order), np.take(W, order)
+    W = np.multiply(part_w, w, out=t1)
+    R = np.take(r, order, out=work.get("R", n), mode="clip")
+    W = np.take(W, order, out=t2, mode="clip")
     A = np.zeros((n_segments, 7, 7))
     b = np.zeros((n_segments, 7))
-    GW = G * W[:, None]
-    m = G.shape[1]
+    GW = work.get("GW", n, m)
+    for j in range(m):
+        np.multiply(G[:, j], W, out=GW[:, j])
     for k, lo, hi in st.groups:
         A[k, :m, :m] = GW[lo:hi].T @ G[lo:hi]
         b[k, :m] = GW[lo:hi].T @ R[lo:hi]

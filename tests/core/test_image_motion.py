@@ -225,3 +225,45 @@ def test_stacked_accumulation_equals_a_point_by_point_reference(rng, with_scale)
     assert np.allclose(total.b, b, rtol=0, atol=1e-9 * np.abs(b).max())
     assert np.isclose(total.cost, cost, rtol=1e-9)
     assert np.isclose(total.count, count, rtol=1e-9)
+
+
+def test_parts_sharing_a_camera_sample_the_pixels_of_their_own_projection(rng):
+    """Parts seen by one camera object are projected together (and the work arrays are
+    reused between calls): each part's residuals, inside flags, cost and count are exactly
+    those of the part accumulated alone, and the sums match the parts' sums."""
+    body = make_body("full")
+    pose = Pose(se3.transform(p=[0, 0, 0.95]), rng.uniform(-0.2, 0.2, body.n_dofs))
+    seg2world = body.seg2world(pose)
+    K = [[150, 0.5, 79.5], [0, 140, 59.5], [0, 0, 1]]
+    terms, images, cams, extra = [], [], [], []
+    for v, eye in enumerate(([0.3, -3.0, 1.0], [2.5, -1.5, 1.2])):
+        R, t = look_at(eye, [0, 0, 0.8])
+        cam = PinholeCamera(f"c{v}", (160, 120), K, R=R, t=t)
+        for p in range(2):          # a "flow" and a "silhouette" part per view
+            n = 150 + 40 * v + 30 * p
+            seg = rng.integers(0, body.n_segments, size=n)
+            ref = body.reference_point("pelvis") + rng.normal(0, 0.3, size=(n, 3))
+            terms.append(im.Term(v, seg, ref, rng.uniform(0, 1, n), rng.uniform(0.5, 1, n),
+                                 0.1 + 0.1 * p, hinge=0.05 if p else None))
+            images.append(im.image_with_gradients(smooth_image(rng)))
+            cams.append(cam)
+            extra.append(None if p else rng.uniform(0.5, 1.5, n))
+    weights = [1.0, 0.3, 1.0, 0.3]
+    for stack_terms in (terms, terms[1:]):      # two sizes through the same work arrays
+        k = len(terms) - len(stack_terms)
+        total, parts = im.accumulate_stacked(
+            im.Stack(stack_terms), images[k:], cams[k:], weights[k:], seg2world,
+            body.n_segments, extra_weights=extra[k:])
+        A = np.zeros_like(total.A)
+        b = np.zeros_like(total.b)
+        for term, image, cam, pw, e, part in zip(stack_terms, images[k:], cams[k:],
+                                                 weights[k:], extra[k:], parts):
+            alone = im.accumulate(term, image, cam, seg2world, body.n_segments,
+                                  extra_weight=e)
+            assert np.array_equal(part.residual, alone.residual)
+            assert np.array_equal(part.inside, alone.inside)
+            assert part.cost == alone.cost and part.count == alone.count
+            A += pw * alone.A
+            b += pw * alone.b
+        assert np.allclose(total.A, A, rtol=0, atol=1e-12 * np.abs(A).max())
+        assert np.allclose(total.b, b, rtol=0, atol=1e-12 * np.abs(b).max())
