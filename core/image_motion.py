@@ -28,6 +28,18 @@ import cv2
 import numpy as np
 
 
+def _segment_runs(seg):
+    """``(segment, first, end)`` of each run of equal values in a sorted segment array: what
+    ``np.unique(seg, return_index=True)`` gives for sorted input, without sorting again."""
+    n = len(seg)
+    if n == 0:
+        return []
+    first = np.flatnonzero(seg[1:] != seg[:-1])
+    first += 1
+    starts = [0] + first.tolist()
+    return list(zip(seg[starts].tolist(), starts, starts[1:] + [n]))
+
+
 @dataclass
 class Term:
     """Model points with targets, observed in one view.
@@ -75,9 +87,7 @@ class Term:
             self.weight = self.weight[order]
             if self.uv is not None:
                 self.uv = self.uv[order]
-        segs, first = np.unique(self.segment, return_index=True)
-        self.groups = list(zip(segs.tolist(), first.tolist(),
-                               first[1:].tolist() + [len(self.segment)]))
+        self.groups = _segment_runs(np.asarray(self.segment))
 
     def __len__(self):
         return len(self.segment)
@@ -321,10 +331,7 @@ class Stack:
         self.order = np.argsort(seg, kind="stable")
         self.unorder = np.empty_like(self.order)
         self.unorder[self.order] = np.arange(len(seg))
-        sorted_seg = seg[self.order]
-        segs, first = np.unique(sorted_seg, return_index=True)
-        self.groups = list(zip(segs.tolist(), first.tolist(),
-                               first[1:].tolist() + [len(seg)]))
+        self.groups = _segment_runs(seg[self.order])
         self.ref_sorted = np.concatenate([t.ref_points for t in parts])[self.order]
         self.target = np.concatenate([t.target for t in parts]).astype(np.float64)
         self.weight = np.concatenate([t.weight for t in parts]).astype(np.float64)

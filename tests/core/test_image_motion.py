@@ -267,3 +267,18 @@ def test_parts_sharing_a_camera_sample_the_pixels_of_their_own_projection(rng):
             b += pw * alone.b
         assert np.allclose(total.A, A, rtol=0, atol=1e-12 * np.abs(A).max())
         assert np.allclose(total.b, b, rtol=0, atol=1e-12 * np.abs(b).max())
+
+
+def test_segment_runs_equal_unique_on_sorted_segments(rng):
+    for n in (0, 1, 2, 7, 500):
+        for top in (1, 3, 20):
+            seg = np.sort(rng.integers(0, top, size=n))
+            segs, first = np.unique(seg, return_index=True)
+            ref = list(zip(segs.tolist(), first.tolist(), first[1:].tolist() + [n]))
+            assert im._segment_runs(seg) == ref
+            if n:
+                shuffled = rng.permutation(seg)
+                term = im.Term(0, shuffled, np.zeros((n, 3)), np.zeros(n), np.ones(n), 1.0)
+                assert term.groups == ref
+                assert im.Stack([term, term]).groups == im._segment_runs(
+                    np.sort(np.concatenate([seg, seg])))
