@@ -298,3 +298,43 @@ def test_prediction_extrapolates_motion(body):
     pred = tracker.predict(s1, s0)
     expected = body.clamp(p1.angles + 0.5 * (p1.angles - p0.angles))
     assert np.allclose(pred.angles, expected)
+
+
+def test_median_equals_numpy():
+    rng = np.random.default_rng(3)
+    for n in range(1, 40):
+        x = rng.normal(size=n) * 10.0 ** rng.uniform(-8, 8)
+        for v in (x, np.round(x, 1), np.abs(x)):
+            assert D._median(v) == np.median(v)
+    assert np.isnan(D._median(np.array([1.0, np.nan, 2.0])))
+
+
+@pytest.mark.parametrize("calibrated", [True, False])
+def test_difference_and_parameter_groups_equal_the_plain_computation(body, calibrated):
+    """_difference takes the log of a root shared by calibrated views once, and the
+    parameter groups are made once per number of views: the same values as view by view."""
+    rng = np.random.default_rng(4)
+    tracker = D.DifferentialTracker(body, calibrated)
+    V = 3
+    cams = [ScaledOrthoCamera("o", SIZE, s=80.0 + c) for c in range(V)]
+
+    def state():
+        roots = np.stack([se3.exp_se3(rng.normal(0, 0.3, 6)) for _ in range(V)])
+        if calibrated:
+            roots[:] = roots[0]
+        return D.State(roots, rng.normal(0, 0.2, body.n_dofs), list(cams))
+
+    a, b = state(), state()
+    roots_cols, scale_cols, angle_cols, P = tracker.layout(V)
+    ref = np.zeros(P)
+    for c, cols in enumerate(roots_cols):
+        ref[cols] = se3.log_se3(a.roots[c] @ se3.invert(b.roots[c]))
+        if scale_cols[c] is not None:
+            ref[scale_cols[c]] = np.log(a.cameras[c].s / b.cameras[c].s)
+    ref[angle_cols] = a.angles - b.angles
+    assert np.array_equal(tracker._difference(a, b), ref)
+    fresh = tracker._make_param_groups(V)
+    for _ in range(2):
+        groups = tracker._param_groups(V)
+        assert len(groups) == len(fresh)
+        assert all(np.array_equal(g, f) for g, f in zip(groups, fresh))
