@@ -113,6 +113,27 @@ def _median_over_frames(stack):
     return np.mean(np.stack(items[(n - 1) // 2:n // 2 + 1]), axis=0)
 
 
+def _dist2(a, b):
+    d = a - b
+    return np.einsum("...c,...c->...", d, d)
+
+
+def _agreement(samples, free, tol2):
+    """For each sample (N, H, W, 3) of each pixel, how many of the pixel's samples that are
+    ``free`` (N, H, W) lie within squared colour distance ``tol2`` of it (itself included).
+
+    Agreement is symmetric (the distance of a pair is the same either way round, to the bit),
+    so each pair is measured once and counted for both of its samples.
+    """
+    N = len(samples)
+    agree = np.zeros(samples.shape[:3], np.int64)
+    for i in range(N):
+        close = _dist2(samples[i:], samples[i]) < tol2       # samples i, i+1, ... against i
+        agree[i] += (close & free[i:]).sum(axis=0)
+        agree[i + 1:] += close[1:] & free[i]
+    return agree
+
+
 def estimate_background(frames, *, tolerance=None, exclude=()):
     """Background of a static view from frames spread over the take.
 
@@ -143,9 +164,7 @@ def estimate_background(frames, *, tolerance=None, exclude=()):
     tol = max(4.0 * noise, 0.05) if tolerance is None else tolerance
     tol2 = np.float32(tol * tol)
 
-    def dist2(a, b):
-        d = a - b
-        return np.einsum("...c,...c->...", d, d)
+    dist2 = _dist2
 
     # Choose each pixel's centre sample on a half-resolution copy (the choice varies slowly
     # across the image), then average at full resolution.
@@ -158,15 +177,7 @@ def estimate_background(frames, *, tolerance=None, exclude=()):
     if exclude:
         person_s = np.stack([cv2.resize(p.astype(np.uint8), (small.shape[2], small.shape[1]),
                                         interpolation=cv2.INTER_NEAREST) > 0 for p in person])
-    # How many samples agree with each one. Agreement is symmetric (the distance of a pair is
-    # the same either way round, to the bit), so each pair is measured once and counted for
-    # both of its samples, each time if the other one is not the person's.
-    free = ~person_s
-    agree = np.zeros(small.shape[:3], np.int64)
-    for i in range(N):
-        close = dist2(small[i:], small[i]) < tol2            # samples i, i+1, ... against i
-        agree[i] += (close & free[i:]).sum(axis=0)
-        agree[i + 1:] += close[1:] & free[i]
+    agree = _agreement(small, ~person_s, tol2)
     best_count = np.zeros(small.shape[1:3], np.int32)
     best_index = np.zeros(small.shape[1:3], np.int64)
     for i in range(N):
