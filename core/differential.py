@@ -33,7 +33,7 @@ from .body import Pose
 from .collision import body_proxies, penalty_system
 from .image_motion import (Accumulated, Stack, Term, accumulate, accumulate_stacked, assemble,
                            image_with_gradients, sample_fast)
-from .recover import LimbSearch, unexplained_foreground
+from .recover import LimbSearch, unexplained_foreground, unexplained_share
 from .render import render, surface_points
 
 
@@ -599,7 +599,7 @@ class DifferentialTracker:
             unexplained = [None if d is None else unexplained_foreground(d < 0, lab, k)
                            for d, lab, k in zip(sdfs, labels, known)]
         report.unexplained = np.array([
-            np.nan if u is None else u.sum() / max(int((lab >= 0).sum()), 1)
+            np.nan if u is None else unexplained_share(u, lab)
             for u, lab in zip(unexplained, labels)])
         return state, report
 

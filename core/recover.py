@@ -121,6 +121,12 @@ def unexplained_foreground(foreground, labels, known=None, min_px=UNEXPLAINED_MI
     return cv2.morphologyEx(rest, cv2.MORPH_OPEN, kernel) > 0
 
 
+def unexplained_share(unexplained, labels):
+    """Unexplained foreground (a mask from :func:`unexplained_foreground`) as a fraction of
+    the model's area in its support map ``labels``."""
+    return float(unexplained.sum() / max(int((labels >= 0).sum()), 1))
+
+
 def _transform_points(T, points, out):
     """``out[n, m] = T[n] @ points[m]`` (rigid transforms (N, 4, 4), points (M, 3)).
 

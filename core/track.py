@@ -24,7 +24,7 @@ from .differential import DifferentialTracker, Settings, State, prepare_images, 
 from .errors import ZoopraxisError
 from .markers import check_markers
 from .plates import to_gray_float
-from .recover import unexplained_foreground
+from .recover import unexplained_foreground, unexplained_share
 from .result import TrackResult
 
 # Status thresholds. The silhouette fit is the fraction of the model's silhouette that lies in
@@ -266,8 +266,7 @@ def take_backgrounds(tracker, source, views, frames, inside, state_at, log):
 def unexplained_fraction(foreground, labels, known=None):
     """Foreground no part of the model explains (thick blobs, :func:`recover.
     unexplained_foreground`), as a fraction of the model's area."""
-    return float(unexplained_foreground(foreground, labels, known).sum()
-                 / max(int((labels >= 0).sum()), 1))
+    return unexplained_share(unexplained_foreground(foreground, labels, known), labels)
 
 
 def silhouette_measures(tracker, state, colours, backgrounds, use_bg, limbs=False):
