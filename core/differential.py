@@ -216,8 +216,12 @@ class DifferentialTracker:
         self.proxies = body_proxies(body)
         self.anchor_terms = None
         self.search = LimbSearch(body)
+        # caches of derived values, read-only once made (see the methods that fill them)
         self._scaled = {}
         self._stack_cache = None
+        self._param_groups_cache = {}
+        self._seg2world_cache = OrderedDict()
+        self._visible_cache = {}
 
     # -- parameter layout ---------------------------------------------------------------------
 
@@ -237,7 +241,7 @@ class DifferentialTracker:
     def _param_groups(self, n_views):
         """Index groups of like parameters: root translations, root rotations, scales, angles
         (made once per number of views; read-only)."""
-        cache = self.__dict__.setdefault("_param_groups_cache", {})
+        cache = self._param_groups_cache
         groups = cache.get(n_views)
         if groups is None:
             groups = cache[n_views] = self._make_param_groups(n_views)
@@ -307,7 +311,7 @@ class DifferentialTracker:
         the renders of a frame ask for the same poses again. Read-only; the same values."""
         root, angles = state.roots[c], state.angles
         key = (root.tobytes(), angles.tobytes(), angles.shape)
-        cache = self.__dict__.setdefault("_seg2world_cache", OrderedDict())
+        cache = self._seg2world_cache
         T = cache.get(key)
         if T is None:
             T = self.body.seg2world(state.pose(c))
@@ -431,7 +435,7 @@ class DifferentialTracker:
         cam = self._camera_at(state.cameras[c], level)
         # A frame whose step runs twice (a limb search's refit) asks again with the same
         # frame-t pose and renders: answer from the last time.
-        seen = self.__dict__.setdefault("_visible_cache", {})
+        seen = self._visible_cache
         key = (id(term), level)
         pose = (state.roots[c].tobytes(), state.angles.tobytes())
         hit = seen.get(key)
