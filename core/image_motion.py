@@ -185,10 +185,20 @@ def sample_fast(stack, uv):
     return out.reshape(-1, C)[:n], inside
 
 
+def geman_mcclure(r2, s2, rho_out=None, weight_out=None):
+    """The Geman-McClure estimator ``rho = r^2 / (r^2 + s^2)`` and its IRLS weights
+    ``(s^2 / (r^2 + s^2))^2`` from squared residuals ``r2`` and squared scales ``s2``
+    (written to the ``out`` arrays if given)."""
+    den = np.add(r2, s2, out=weight_out)
+    rho = np.divide(r2, den, out=rho_out)
+    weight = np.divide(s2, den, out=den)
+    np.square(weight, out=weight)
+    return rho, weight
+
+
 def geman_mcclure_weights(r, scale):
     """IRLS weights of the Geman-McClure estimator ``rho(r) = r^2 / (r^2 + s^2)``."""
-    s2 = scale * scale
-    return (s2 / (r * r + s2)) ** 2
+    return geman_mcclure(r * r, scale * scale)[1]
 
 
 class _Pullback:
@@ -381,10 +391,6 @@ _WIDE = frozenset(("X", "Xs", "vals", "grad", "gp", "gp_sorted", "G", "GW"))
 _WORKSPACE = _Workspace()
 
 
-def _workspace():
-    return _WORKSPACE
-
-
 def _camera_runs(bounds, cameras):
     """Runs of consecutive parts with the same camera object: ``(lo, hi, first, last)``
     with the runs' point range and parts ``first`` to ``last - 1``."""
@@ -433,7 +439,7 @@ def accumulate_stacked(stack_terms, images, cameras, weights, seg2world, n_segme
     st = stack_terms
     bounds = st.bounds
     n = int(bounds[-1])
-    work = _workspace()
+    work = _WORKSPACE
     # world points of all parts: one product per segment, then back to the parts' order
     Xs = work.get("Xs", n, 3)
     for k, lo, hi in st.groups:
@@ -478,13 +484,7 @@ def accumulate_stacked(stack_terms, images, cameras, weights, seg2world, n_segme
         w = np.multiply(base, ew, out=ew)
     r2 = np.multiply(r, r, out=work.get("r2", n))
     if robust:
-        # rho = r^2 / (r^2 + s^2) and the Geman-McClure weights (s^2 / (r^2 + s^2))^2
-        # (geman_mcclure_weights), sharing r^2 + s^2
-        s2 = st.scale2
-        den = np.add(r2, s2, out=work.get("den", n))
-        rho = np.divide(r2, den, out=work.get("rho", n))
-        gm = np.divide(s2, den, out=den)
-        np.square(gm, out=gm)
+        rho, gm = geman_mcclure(r2, st.scale2, work.get("rho", n), work.get("den", n))
         w = np.multiply(w, gm, out=work.get("w", n))
     else:
         rho = r2
