@@ -665,7 +665,7 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
 
 
 def make_result(body, views, plates, factors, states, reports, calibrated, init,
-                 anchor_frames, frames, cancelled, ref_fit, ref_iou, ref_unexplained=None):
+                 anchor_frames, frames, cancelled, ref_fit, ref_iou, ref_unexplained):
     order = sorted(states)
     F = len(order)
     joints3d = np.zeros((F, 17, 3))
@@ -720,8 +720,7 @@ def make_result(body, views, plates, factors, states, reports, calibrated, init,
             status.append("ok")
             continue
         status.append(frame_status(fit[i] / ref_fit, iou[i] / ref_iou, res_all[i].max() / med,
-                                   limb_fit[i], None if ref_unexplained is None
-                                   else unexplained[i] - ref_unexplained))
+                                   limb_fit[i], unexplained[i] - ref_unexplained))
     fps = plates[views[0]].fps or 30.0
     body_info = {"template": body.template, "shapes": body.shapes,
                  "dims": {k: round(v, 5) for k, v in body.dims.items()},
@@ -733,9 +732,8 @@ def make_result(body, views, plates, factors, states, reports, calibrated, init,
              "limb_overlap_mm": np.round(1000 * overlap, 2).tolist(),
              "limb_fit": limb_fit, "recovered_limbs": recovered,
              "unexplained": np.round(np.nan_to_num(unexplained, nan=-1.0), 4).tolist(),
-             "unexplained_anchor": np.round(np.nan_to_num(
-                 np.full(len(views), np.nan) if ref_unexplained is None else ref_unexplained,
-                 nan=-1.0), 4).tolist(),
+             "unexplained_anchor": np.round(np.nan_to_num(ref_unexplained, nan=-1.0),
+                                            4).tolist(),
              "warnings": list(init.warnings)}
     return TrackResult(mode="calibrated" if calibrated else "uncalibrated", fps=float(fps),
                        frames=np.array(order), joints3d=joints3d, joints2d=joints2d,
