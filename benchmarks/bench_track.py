@@ -181,7 +181,9 @@ def main(argv=None):
                    help="processes for the passes of takes with several anchors (default: one "
                         "per core, at most 4, as `zoopraxis track`)")
     args = p.parse_args(argv)
-    workers = args.workers or min(os.cpu_count() or 1, 4)
+    from zoopraxis.core.track import default_workers
+
+    workers = args.workers or default_workers()
     print(f"{os.cpu_count()} cores; passes of multi-anchor takes in {workers} processes")
     if not (DATA / "cmu_mocap").is_dir():
         sys.exit(f"no motion capture at {DATA / 'cmu_mocap'} (set ZOOPRAXIS_SHARED_DATA)")

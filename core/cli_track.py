@@ -1,7 +1,6 @@
 """``zoopraxis track``: plates and markers in, result.json out (DESIGN, Command line)."""
 
 import argparse
-import os
 import time
 
 from .cli_common import add_output_arguments, check_output, open_plates, parse_view_values
@@ -80,9 +79,9 @@ def main(argv):
 
             result = finetune(opened, anchors, cameras, **kwargs).result
         elif args.tracker == "differential":
-            from .track import track
+            from .track import default_workers, track
 
-            workers = args.workers or min(os.cpu_count() or 1, 4)
+            workers = args.workers or default_workers()
             result = track(opened, anchors, cameras, workers=workers, **kwargs)
         else:
             try:

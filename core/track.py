@@ -431,6 +431,13 @@ def _run_in_turn(run, jobs, progress, cancel, total):
     return results, False
 
 
+def default_workers():
+    """Worker processes for the passes when none are asked for: one per core, at most 4."""
+    import os
+
+    return min(os.cpu_count() or 1, 4)
+
+
 def _can_fork():
     """Worker processes share the take by forking: on Linux (macOS forbids forking a process
     with system frameworks loaded, Windows cannot fork), and not inside the Blender application
