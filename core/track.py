@@ -1,10 +1,12 @@
 """Track a take: plates and markers in, a :class:`result.TrackResult` out.
 
 The take runs from anchor to anchor. Between two anchors it is tracked forward from the first
-and backward from the second, and the two passes are blended with weights that fall off with the
-distance from their anchor, so that a later anchor corrects the drift of the earlier one; before
-the first anchor the take is tracked backward, after the last forward. Each anchor frame's pose
-comes from the markers (:func:`initialize.initialize`, Bregler & Malik §2.6).
+and backward from the second, each pass to a little past the middle, and the two passes are
+blended there with weights that fall off with the distance from their anchor, so that a later
+anchor corrects the drift of the earlier one; a pass goes further when the other one lost the
+body on its way (:func:`extend_passes`). Before the first anchor the take is tracked backward,
+after the last forward. Each anchor frame's pose comes from the markers
+(:func:`initialize.initialize`, Bregler & Malik §2.6).
 
 Working images are the plates scaled so that their longer side is at most ``max_size`` pixels;
 results are reported in the plates' own pixels.
@@ -49,6 +51,16 @@ LIMB_LOST, LIMB_UNCERTAIN = -0.25, 0.5
 # from the model's exceed it too (17 of walk3's 206 frames under 50 mm; arms swinging out of
 # the model's reach); those were uncertain already.
 UNEXPLAINED_UNCERTAIN = 0.25
+# Between two anchors the forward pass tracks to BLEND_REACH frames past the middle and the
+# backward pass as far before it, and the two are blended over that stretch: each frame is
+# tracked from its nearer anchor, and far fewer frames are tracked than with two whole passes.
+# A pass whose quality (see blend_weights) falls below POOR_PASS before the stretch calls its
+# partner on towards its anchor. walk3 of bench_track, anchors every 100 frames, 2 processes:
+# whole passes 28.4 mm at 4.9 fps; 15 frames 28.1 mm, 7.4 fps; 8 frames 28.0 mm, 8.6 fps.
+# 4 frames (25.6 mm, 10 fps) left a jump at a seam: a joint acceleration of 50 mm per frame^2,
+# where the walk's own reaches 22.
+BLEND_REACH = 8
+POOR_PASS = 0.5
 
 
 @dataclass
@@ -159,8 +171,42 @@ def plan_passes(anchor_frames, frames):
     return passes, total
 
 
+def _pass_quality(reports):
+    """Each frame's largest grey residual over the views and mean silhouette overlap."""
+    r = np.array([np.max(rep.residual) for rep in reports], float)
+    iou = np.array([np.nanmean(rep.iou) if np.isfinite(rep.iou).any() else np.nan
+                    for rep in reports], float)
+    return r, iou
+
+
+def _references(forward, backward):
+    """The better pass's typical residual and overlap over the frames both tracked (a whole
+    pass may be lost)."""
+    rf, iou_f = _pass_quality(forward)
+    rb, iou_b = _pass_quality(backward)
+    r_ref = min(np.median(rf), np.median(rb)) + 1e-9
+    medians = [np.nanmedian(i) for i in (iou_f, iou_b) if np.isfinite(i).any()]
+    return r_ref, (max(medians) if medians else np.nan)
+
+
+def _goodness(reports, references, smooth):
+    """Per frame, 1 for a pass as good as the reference, towards 0 for one that has lost the
+    body (a grey residual above the reference, or a poorer overlap); a running mean over
+    ``smooth`` frames keeps it from jumping."""
+    r_ref, iou_ref = references
+    r, iou = _pass_quality(reports)
+    g = np.exp(-np.maximum(r / r_ref - 1.0, 0.0))
+    if np.isfinite(iou_ref):
+        g *= np.clip(np.nan_to_num(iou, nan=iou_ref) / iou_ref, 0.05, 1.0) ** 2
+    n = len(g)
+    if smooth > 1 and n > 1:
+        kernel = np.ones(min(smooth, n)) / min(smooth, n)
+        g = np.convolve(np.pad(g, len(kernel) // 2, mode="edge"), kernel, "valid")[:n]
+    return g
+
+
 def blend_weights(forward, backward, smooth=5):
-    """How much of the backward pass each frame between two anchors takes (0: all forward).
+    """How much of the backward pass each frame of a blended stretch takes (0: all forward).
 
     By distance, the nearer anchor's pass counts more; by quality, a pass that has lost the
     body (a grey residual well above the two passes' median, or a poorer silhouette overlap)
@@ -169,7 +215,7 @@ def blend_weights(forward, backward, smooth=5):
     Parameters
     ----------
     forward, backward : list of StepReport
-        The two passes' reports at the frames strictly between the anchors, in frame order.
+        The two passes' reports at the frames of the stretch, in frame order.
     smooth : int
         Frames of the running mean that keeps the weights from jumping.
 
@@ -181,32 +227,64 @@ def blend_weights(forward, backward, smooth=5):
     if n == 0:
         return np.zeros(0)
     w = np.arange(1, n + 1) / (n + 1)
-
-    def quality(reports):
-        r = np.array([np.max(rep.residual) for rep in reports], float)
-        iou = np.array([np.nanmean(rep.iou) if np.isfinite(rep.iou).any() else np.nan
-                        for rep in reports], float)
-        return r, iou
-
-    rf, iou_f = quality(forward)
-    rb, iou_b = quality(backward)
-    # the better pass's typical values are the reference (a whole pass may be lost)
-    r_ref = min(np.median(rf), np.median(rb)) + 1e-9
-    medians = [np.nanmedian(i) for i in (iou_f, iou_b) if np.isfinite(i).any()]
-    iou_ref = max(medians) if medians else np.nan
-
-    def goodness(r, iou):
-        g = np.exp(-np.maximum(r / r_ref - 1.0, 0.0))
-        if np.isfinite(iou_ref):
-            g *= np.clip(np.nan_to_num(iou, nan=iou_ref) / iou_ref, 0.05, 1.0) ** 2
-        return g
-
-    gf, gb = goodness(rf, iou_f), goodness(rb, iou_b)
-    if smooth > 1 and n > 1:
-        kernel = np.ones(min(smooth, n)) / min(smooth, n)
-        gf = np.convolve(np.pad(gf, len(kernel) // 2, mode="edge"), kernel, "valid")[:n]
-        gb = np.convolve(np.pad(gb, len(kernel) // 2, mode="edge"), kernel, "valid")[:n]
+    refs = _references(forward, backward)
+    gf, gb = _goodness(forward, refs, smooth), _goodness(backward, refs, smooth)
     return w * gb / ((1 - w) * gf + w * gb + 1e-12)
+
+
+def blend_stretch(a, b, reach=None):
+    """The frames between anchors ``a < b`` that both passes track at first: ``reach`` frames
+    either side of the middle (all of them when ``reach`` is None or the anchors are close).
+
+    Returns
+    -------
+    lo, hi : int
+        The forward pass tracks ``a+1 .. hi``, the backward pass ``lo .. b-1``.
+    """
+    if reach is None:
+        return a + 1, b - 1
+    mid = (a + b) // 2
+    return max(a + 1, mid - reach), min(b - 1, mid + reach)
+
+
+def extend_passes(forward, backward, lo, hi, reach, poor=POOR_PASS, smooth=5):
+    """How far the two passes between two anchors must go on after their first stretch.
+
+    A pass that lost the body before the blended stretch ``lo .. hi`` began leaves frames that
+    only it has tracked: its partner goes on towards the first anchor, to ``reach`` frames
+    before the first frame where the lost pass's quality (:func:`_goodness`, against the two
+    passes' references over the stretch) falls below ``poor``.
+
+    Parameters
+    ----------
+    forward : dict of int to StepReport
+        Frames ``a+1 .. hi``.
+    backward : dict of int to StepReport
+        Frames ``lo .. b-1``.
+
+    Returns
+    -------
+    forward_to : int
+        The last frame the forward pass must reach (``hi`` when it need not go on).
+    backward_to : int
+        The first frame the backward pass must reach (``lo`` when it need not go on).
+    """
+    stretch = range(lo, hi + 1)
+    refs = _references([forward[f] for f in stretch], [backward[f] for f in stretch])
+    backward_to, forward_to = lo, hi
+    early = sorted(f for f in forward if f < lo)
+    if early:
+        g = _goodness([forward[f] for f in early], refs, smooth)
+        bad = [f for f, x in zip(early, g) if x < poor]
+        if bad:
+            backward_to = max(early[0], bad[0] - reach)
+    late = sorted(f for f in backward if f > hi)
+    if late:
+        g = _goodness([backward[f] for f in late], refs, smooth)
+        bad = [f for f, x in zip(late, g) if x < poor]
+        if bad:
+            forward_to = min(late[-1], bad[-1] + reach)
+    return forward_to, backward_to
 
 
 def take_backgrounds(tracker, source, views, frames, inside, state_at, log):
@@ -424,7 +502,7 @@ def _run_in_turn(run, jobs, progress, cancel, total):
 
     for job in jobs:
         try:
-            results[job] = run(*job, report, cancel)
+            results[job] = run(job, report, cancel)
         except Cancelled as exc:
             results[job] = exc.args[0]
             return results, True
@@ -469,7 +547,7 @@ def _forked_pass(job):
             counter.value += n
 
     try:
-        return run(*job, report, stop.is_set), False
+        return run(job, report, stop.is_set), False
     except Cancelled as exc:
         return exc.args[0], True
 
@@ -514,7 +592,7 @@ def _run_in_processes(run, jobs, workers, progress, cancel, total):
 
 def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template="full",
           settings=None, init=None, max_size=960, progress=None, cancel=None, log=None,
-          workers=1):
+          workers=1, blend_reach=BLEND_REACH):
     """Track a take with the differential tracker.
 
     Parameters
@@ -537,6 +615,9 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
         Processes for the tracking passes (a take with several anchors has several
         independent passes); 1 runs them in turn. Worker processes fork, so they are used on
         Linux outside Blender only.
+    blend_reach : int or None
+        Between two anchors, how many frames past the middle each pass tracks at first
+        (:data:`BLEND_REACH`); None tracks both passes from anchor to anchor.
 
     Returns
     -------
@@ -600,29 +681,38 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
         return tracker.map_views(one, len(colours))
 
     anchor_frames = [a.frame for a in inside]
-    passes, total = plan_passes(anchor_frames, frames)
+    passes, _ = plan_passes(anchor_frames, frames)
 
     states, reports = {}, {}
     for a in anchor_frames:
         states[a] = state_at(a)
         reports[a] = None
 
-    def run(start, stop, report, should_stop):
-        """Track from anchor ``start`` to ``stop`` (inclusive), either direction."""
+    resume_from = {}    # job -> (frame, state before it, state at it): a pass that goes on
+
+    def run(job, report, should_stop):
+        """Track from anchor ``job[0]`` to frame ``job[1]`` (inclusive), either direction; a
+        third item is the frame where an earlier part of the same pass stopped."""
+        start, stop = job[:2]
         step = 1 if stop > start else -1
         # each pass draws its own search samples: the same result whichever runs first
         if tracker.search is not None:
-            tracker.search.reseed((start, stop))
+            tracker.search.reseed(job)
         st = state_at(start)
         ims = images(start)
         renders = tracker.render_views(st)
         tracker.set_anchor(st, ims, renders)
         prev = None
+        first = start
+        if len(job) > 2:
+            first, prev, st = resume_from[job]
+            ims = images(first)
+            renders = tracker.render_views(st)
         out = {}
         # The next frame's images (decoding, foreground, pyramids, distance images: OpenCV
         # work that runs outside the GIL) are prepared in a thread while this one is tracked.
-        ahead = thread_pool("frames", 1).submit(images, start + step) if start != stop else None
-        for f in range(start + step, stop + step, step):
+        ahead = thread_pool("frames", 1).submit(images, first + step) if first != stop else None
+        for f in range(first + step, stop + step, step):
             if should_stop is not None and should_stop():
                 raise Cancelled(out)
             ims1 = ahead.result()
@@ -634,32 +724,76 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
             report(1)
         return out
 
+    done = 0
+
+    def run_jobs(jobs, total):
+        """Run passes (in worker processes when there are several); progress counts on."""
+        nonlocal done
+        # longest first: even out the workers
+        jobs = sorted(jobs, key=lambda job: -abs(job[1] - (job[2] if len(job) > 2 else job[0])))
+        base = done
+
+        def counted(n, _total):
+            nonlocal done
+            done = base + n
+            if progress is not None:
+                progress(done, total)
+
+        if workers > 1 and len(jobs) > 1 and _can_fork():
+            log(f"tracking {len(jobs)} passes in {min(workers, len(jobs))} processes")
+            return _run_in_processes(run, jobs, min(workers, len(jobs)), counted, cancel, total)
+        return _run_in_turn(run, jobs, counted, cancel, total)
+
     def blended_fit(state, frame):
         """Silhouette fit and overlap of a blended pose, measured anew: they are not either
         pass's."""
         return silhouette_measures(tracker, state, source.colour(frame), backgrounds, use_bg,
                                    limbs=calibrated)
 
-    jobs = [(a, b) for a, b, _ in passes] + [(b, a) for a, b, kind in passes if kind == "blend"]
-    jobs.sort(key=lambda job: -abs(job[1] - job[0]))       # longest first: even out workers
-    if workers > 1 and len(jobs) > 1 and _can_fork():
-        log(f"tracking {len(jobs)} passes in {min(workers, len(jobs))} processes")
-        results, cancelled = _run_in_processes(run, jobs, min(workers, len(jobs)), progress,
-                                               cancel, total)
-    else:
-        results, cancelled = _run_in_turn(run, jobs, progress, cancel, total)
+    # First the single passes and, between two anchors, each pass up to a little past the
+    # middle; then the passes whose partner lost the body on the way go on towards it.
+    pairs = {(a, b): blend_stretch(a, b, blend_reach) for a, b, kind in passes if kind == "blend"}
+    jobs = [(a, b) for a, b, kind in passes if kind != "blend"]
+    for (a, b), (lo, hi) in pairs.items():
+        jobs += [(a, hi), (b, lo)]
+    total = sum(abs(b - a) for a, b in jobs)
+    results, cancelled = run_jobs(jobs, total)
+    tracked = {}        # pass (from, to) -> frame -> (state, report)
+    for (a, b), (lo, hi) in pairs.items():
+        tracked[(a, b)], tracked[(b, a)] = results.get((a, hi), {}), results.get((b, lo), {})
+    for a, b, kind in passes:
+        if kind != "blend":
+            tracked[(a, b)] = results.get((a, b), {})
+    if not cancelled:
+        more = {}       # job -> the pass it continues
+        for (a, b), (lo, hi) in pairs.items():
+            fwd, bwd = tracked[(a, b)], tracked[(b, a)]
+            to_f, to_b = extend_passes({f: r for f, (_, r) in fwd.items()},
+                                       {f: r for f, (_, r) in bwd.items()}, lo, hi, blend_reach)
+            for (start, stop), part, at, to in (((a, b), fwd, hi, to_f), ((b, a), bwd, lo, to_b)):
+                if to != at:
+                    step = 1 if stop > start else -1
+                    before = part[at - step][0] if at - step != start else state_at(start)
+                    job = (start, to, at)
+                    resume_from[job] = (at, before, part[at][0])
+                    more[job] = (start, stop)
+        if more:
+            log(f"{len(more)} passes go on where their partner lost the body")
+            total += sum(abs(job[1] - job[2]) for job in more)
+            extra, cancelled = run_jobs(list(more), total)
+            for job, out in extra.items():
+                tracked[more[job]].update(out)
 
     for a, b, kind in passes:
-        fwd = results.get((a, b), {})
-        bwd = results.get((b, a), {}) if kind == "blend" else {}
+        fwd, bwd = tracked[(a, b)], tracked.get((b, a), {})
         inner = range(a + 1, b)
-        if kind == "blend" and all(f in fwd and f in bwd for f in inner):
-            weights = blend_weights([fwd[f][1] for f in inner], [bwd[f][1] for f in inner])
-            for f, w in zip(inner, weights):
+        both = [f for f in inner if f in fwd and f in bwd]
+        if kind == "blend" and both and all(f in fwd or f in bwd for f in inner):
+            weights = blend_weights([fwd[f][1] for f in both], [bwd[f][1] for f in both])
+            for f, w in zip(both, weights):
                 states[f] = blend_states(fwd[f][0], bwd[f][0], w)
                 reports[f] = blend_report(fwd[f][1], bwd[f][1], w, blended_fit(states[f], f))
-            continue
-        # a single pass, or a pair cut short by a cancel: keep every frame tracked
+        # frames only one pass tracked (or a pair cut short by a cancel): keep them all
         for part in (fwd, bwd):
             for f, (st, rep) in part.items():
                 if f not in states:

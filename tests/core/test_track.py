@@ -168,8 +168,9 @@ def test_passes_in_worker_processes_give_the_same_track(take):
     assert np.array_equal(res[1].angles, res[2].angles)
     assert np.array_equal(res[1].roots, res[2].roots)
     assert res[1].status == res[2].status
-    # 3 + 3 + 3 + 3 + 1 frames tracked (blended stretches twice), all reported
-    assert calls[1][-1] == calls[2][-1] == (13, 13)
+    # 2 + 2 + 2 + 2 + 1 frames tracked (blended stretches twice, the anchors not again),
+    # all reported
+    assert calls[1][-1] == calls[2][-1] == (9, 9)
 
 
 def test_cancel_with_worker_processes_keeps_what_they_tracked(take):
@@ -313,3 +314,66 @@ def test_blend_weights_trust_the_pass_that_holds():
     w = T.blend_weights(reports([3.0] * n, [np.nan] * n),
                         reports([12.0] * n, [np.nan] * n))
     assert np.all(w[:5] < 0.05) and np.all(w < 0.35)
+
+
+def test_passes_between_anchors_meet_past_the_middle(take):
+    """Each pass tracks a little past the middle; the two are blended there, and each frame
+    outside that stretch comes from its nearer anchor's pass."""
+    scene, joints, body, poses = take
+    assert T.blend_stretch(0, 100, 8) == (42, 58)
+    assert T.blend_stretch(0, 7, None) == (1, 6) and T.blend_stretch(0, 7, 15) == (1, 6)
+    calls = []
+    res = run(take, anchor_frames=(0, N - 1), blend_reach=1,
+              progress=lambda d, t: calls.append((d, t)))
+    # forward 1..4, backward 6..2: 4 + 5 frames instead of 6 + 6
+    assert calls[-1] == (9, 9)
+    assert list(res.frames) == list(range(N))
+    error = np.linalg.norm(res.joints3d - joints, axis=2).mean(axis=1)
+    assert error.max() < 0.06
+    # blended frames carry limb scores measured on the blended pose; the others their pass's
+    assert all(res.extra["limb_fit"][f] for f in (2, 3, 4))
+
+
+def test_a_pass_goes_on_where_its_partner_lost_the_body(take, monkeypatch):
+    scene, joints, body, poses = take
+    cams = {c.name: c for c in scene.cameras}
+    frozen = {k: FrozenPlate(p) for k, p in synth.scene_plates(scene).items()}
+    anchors = anchors_at(scene, joints, (0, N - 1))
+    init = T.Initial(body, {f: poses[f] for f in (0, N - 1)}, cams)
+    full = T.track(frozen, anchors, cams, init=init, blend_reach=None)
+    asked = []
+
+    def lost_early(forward, backward, lo, hi, reach, **kw):
+        asked.append((sorted(forward), sorted(backward), lo, hi))
+        return N - 2, 1         # both passes must reach the other anchor
+    monkeypatch.setattr(T, "extend_passes", lost_early)
+    calls, said = [], []
+    res = T.track(frozen, anchors, cams, init=init, blend_reach=1,
+                  progress=lambda d, t: calls.append((d, t)), log=said.append)
+    assert asked == [([1, 2, 3, 4], [2, 3, 4, 5, 6], 2, 4)]
+    assert "2 passes go on where their partner lost the body" in said
+    assert calls[-1] == (12, 12)
+    # the passes went on from where they stopped: the poses of whole passes, blended over
+    # the whole stretch (only the limb search's draws differ)
+    np.testing.assert_allclose(res.joints3d, full.joints3d, atol=1e-4)
+
+
+def test_extend_passes_follows_the_lost_pass():
+    from zoopraxis.core.differential import StepReport
+
+    def rep(r, iou):
+        return StepReport(np.array([r, r]), np.array([iou, iou]), 0.0, 1)
+
+    a, b, lo, hi, reach = 0, 60, 26, 34, 4
+    good = {f: rep(3.0, 0.7) for f in range(a + 1, b)}
+    forward = {f: good[f] for f in range(a + 1, hi + 1)}
+    backward = {f: good[f] for f in range(lo, b)}
+    assert T.extend_passes(forward, backward, lo, hi, reach) == (hi, lo)
+    # the forward pass lost the body from frame 12 to 20 and found it again
+    lost_fwd = {f: rep(12.0, 0.3) if 12 <= f <= 20 else r for f, r in forward.items()}
+    forward_to, backward_to = T.extend_passes(lost_fwd, backward, lo, hi, reach)
+    assert forward_to == hi and 12 - reach - 2 <= backward_to <= 12 - reach + 2
+    # the backward pass lost it near its anchor
+    lost_bwd = {f: rep(12.0, 0.3) if f >= 50 else r for f, r in backward.items()}
+    forward_to, backward_to = T.extend_passes(forward, lost_bwd, lo, hi, reach)
+    assert backward_to == lo and forward_to == b - 1
