@@ -728,7 +728,6 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
 
     def run_jobs(jobs, total):
         """Run passes (in worker processes when there are several); progress counts on."""
-        nonlocal done
         # longest first: even out the workers
         jobs = sorted(jobs, key=lambda job: -abs(job[1] - (job[2] if len(job) > 2 else job[0])))
         base = done
