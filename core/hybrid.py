@@ -40,6 +40,7 @@ need calibrated cameras: the filter's likelihood projects through perspective ca
 """
 
 import dataclasses
+import itertools
 
 import numpy as np
 
@@ -52,9 +53,9 @@ from .image_motion import accumulate
 from .motion_prior import SmoothMotionPrior, WalkingPrior, smooth_sigmas
 from .particle import ParticleFilter
 from .plates import to_gray_float
-from .track import (Cancelled, FrameSource, Initial, blend_report, blend_states, blend_weights,
-                    check_take, make_result, plan_passes, silhouette_measures,
-                    take_backgrounds)
+from .track import (BLEND_REACH, Cancelled, FrameSource, Initial, blend_report, blend_states,
+                    blend_stretch, blend_weights, check_take, extend_passes, make_result,
+                    plan_passes, silhouette_measures, take_backgrounds)
 
 TRACKERS = ("particle", "hybrid")
 PRIORS = ("smooth", "walk")
@@ -224,7 +225,7 @@ def _worse(a, b):
 def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, seed=2345,
           frames=None, offsets=None, template="full", max_size=960, progress=None, cancel=None,
           log=None, init=None, settings=None, prior="smooth", recentre=RECENTRE,
-          prior_scale=None, layers=None, silhouette=None):
+          prior_scale=None, layers=None, silhouette=None, blend_reach=BLEND_REACH):
     """Track a take with the particle filter, alone or as the coarse stage of the hybrid.
 
     Parameters
@@ -271,6 +272,9 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
         appearance only, as in the paper). Default :data:`SILHOUETTE` with the smooth prior,
         0 with the walking prior (there it made the hybrid's slow-walk test worse, 25 -> 40-54
         mm; on the jumps, smooth prior, it removes the frames over 100 mm: 30 -> 0).
+    blend_reach : int or None
+        Between two anchors, how many frames past the middle each pass tracks at first
+        (:data:`track.BLEND_REACH`); None tracks both passes from anchor to anchor.
 
     Returns
     -------
@@ -360,20 +364,26 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
                                  carry_moves=tracker == "particle")
 
     anchor_frames = [a.frame for a in inside]
-    passes, total = plan_passes(anchor_frames, frames)
+    passes, _ = plan_passes(anchor_frames, frames)
+    # Between two anchors each pass tracks to a little past the middle (track.BLEND_REACH).
+    stretches = {(a, b): blend_stretch(a, b, blend_reach) for a, b, kind in passes
+                 if kind == "blend"}
+    total = sum(abs(b - a) for a, b, kind in passes if kind != "blend")
+    total += sum(hi - a + b - lo for (a, b), (lo, hi) in stretches.items())
     done = 0
     seeds = iter(range(seed, seed + 7919 * (len(passes) * 2 + 1), 7919))
     # The search draws as many poses as the filter has particles, shared among the groups.
     groups = search_groups(body, fps)
     search_n = max(2, particles // len(groups))
-    search_rng = np.random.default_rng(seed + 1)
+    # Each pass draws its search samples from its own generator (the first pass's is the
+    # take's): passes between two anchors advance in turn.
+    search_rngs = (np.random.default_rng(seed + 1 if k == 0 else [seed + 1, k])
+                   for k in itertools.count())
 
     def run(start, stop):
-        """Track from anchor ``start`` to ``stop`` (inclusive), either direction.
-
-        Returns a dict frame -> (state, step report, spread, filter status, effective sample
-        size).
-        """
+        """Track from anchor ``start`` towards ``stop`` (inclusive), either direction: a
+        generator of (frame, (state, step report, spread, filter status, effective sample size,
+        silhouette cover)), the anchor frame first, one frame tracked per item."""
         nonlocal done
         step = 1 if stop > start else -1
         st = state_at(start)
@@ -382,20 +392,23 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
         ims = images(colour, fg)
         renders = diff.render_views(st)
         diff.set_anchor(st, ims, renders)
+        anchor_terms = diff.anchor_terms     # this pass's: another may set its own meanwhile
+        search_rng = next(search_rngs)
         prev = None
         pf = ParticleFilter(body, work_cams, make_prior(), n_particles=particles,
                             seed=next(seeds), layers=layers, silhouette=silhouette)
         first = pf.start(colour, st.pose(0))
         pf.likelihood.set_foreground(fg)
         reference = covered_at(pf, st.pose(0))
-        out = {start: (st, None, first.spread, "ok", first.ess, reference)}
+        yield start, (st, None, first.spread, "ok", first.ess, reference)
         for f in range(start + step, stop + step, step):
             if cancel is not None and cancel():
-                raise Cancelled(out)
+                raise Cancelled()
             colour = source.colour(f)
             fg = masks(colour)
             ims1 = images(colour, fg)
             fs = pf.step(colour, fg)
+            diff.anchor_terms = anchor_terms
             if tracker == "particle":
                 new = state_of(fs.pose)
                 rep = _measure(diff, st, ims, ims1, new, renders)
@@ -417,11 +430,16 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
                 status = _worse(status, "uncertain")
             prev, st, ims, renders = st, new, ims1, rep.renders
             rep.renders = None      # full-size images: keep them only for the next step
-            out[f] = (new, rep, fs.spread, status, fs.ess, covered)
             done += 1
             if progress is not None:
                 progress(done, total)
-        return out
+            yield f, (new, rep, fs.spread, status, fs.ess, covered)
+
+    def advance(frames_of_pass, out, until):
+        """Take a pass's frames into ``out`` up to frame ``until``."""
+        while until not in out:
+            f, item = next(frames_of_pass)
+            out[f] = item
 
     def blended_fit(state, frame):
         """Silhouette fit and overlap of a blended pose, measured anew."""
@@ -429,28 +447,49 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
 
     tracked = {}
     cancelled = False
+    parts = []      # every pass's frames so far: kept on a cancel
     try:
         for a, b, kind in passes:
-            fwd = run(a, b)
+            fwd = {}
+            parts.append(fwd)
             if kind != "blend":
+                advance(run(a, b), fwd, b)
                 for f, item in fwd.items():
                     tracked.setdefault(f, item)
                 continue
-            bwd = run(b, a)
+            bwd = {}
+            parts.append(bwd)
+            lo, hi = stretches[(a, b)]
+            forward, backward = run(a, b), run(b, a)
+            advance(forward, fwd, hi)
+            advance(backward, bwd, lo)
+            to_f, to_b = extend_passes({f: item[1] for f, item in fwd.items() if f != a},
+                                       {f: item[1] for f, item in bwd.items() if f != b},
+                                       lo, hi, blend_reach)
+            if (to_f, to_b) != (hi, lo):
+                log(f"frames {a}-{b}: a pass goes on where the other lost the body")
+                total += to_f - hi + lo - to_b
+                advance(forward, fwd, to_f)
+                advance(backward, bwd, to_b)
             tracked.setdefault(a, fwd[a])
             tracked.setdefault(b, bwd[b])
-            between = range(a + 1, b)
-            weights = blend_weights([fwd[f][1] for f in between], [bwd[f][1] for f in between])
-            for f, w in zip(between, weights):
+            both = [f for f in range(a + 1, b) if f in fwd and f in bwd]
+            weights = blend_weights([fwd[f][1] for f in both], [bwd[f][1] for f in both])
+            for f, w in zip(both, weights):
                 (sf, rf, pf_, *_), (sb, rb, pb, *_) = fwd[f], bwd[f]
                 state = blend_states(sf, sb, w)
                 near = fwd[f] if w < 0.5 else bwd[f]
                 tracked[f] = (state, blend_report(rf, rb, w, blended_fit(state, f)),
                               (1 - w) * pf_ + w * pb, near[3], near[4], near[5])
-    except Cancelled as exc:
+            # frames only one pass tracked
+            for part in (fwd, bwd):
+                for f, item in part.items():
+                    tracked.setdefault(f, item)
+    except Cancelled:
         cancelled = True
-        for f, item in exc.args[0].items():
-            tracked.setdefault(f, item)
+        for part in parts:
+            for f, item in part.items():
+                tracked.setdefault(f, item)
         log("cancelled: keeping the frames tracked so far")
     for a in anchor_frames:
         tracked.setdefault(a, (state_at(a), None, None, "ok", float(particles), np.nan))

@@ -152,6 +152,27 @@ def test_blends_passes_between_anchors_and_tracks_before_the_first(slow):
     assert mpjpe(res, joints).max() < 0.05
 
 
+def test_passes_between_anchors_meet_past_the_middle(slow, monkeypatch):
+    """Each pass tracks to a little past the middle, and goes on when its partner lost the
+    body: passes advance in turn, each with its own anchor appearance and search draws, so
+    going on gives what whole passes give."""
+    scene, joints, body, poses = slow
+    calls = []
+    res = run(slow, "hybrid", anchor_frames=(0, 5), particles=100, blend_reach=0,
+              progress=lambda d, t: calls.append((d, t)))
+    # forward 1..2, backward 4..2
+    assert calls[-1] == (5, 5) and list(res.frames) == list(range(6))
+    assert mpjpe(res, joints).max() < 0.05
+    whole = run(slow, "hybrid", anchor_frames=(0, 5), particles=100, blend_reach=None)
+    monkeypatch.setattr(hybrid, "extend_passes", lambda *a, **kw: (4, 1))
+    calls, said = [], []
+    res = run(slow, "hybrid", anchor_frames=(0, 5), particles=100, blend_reach=0,
+              progress=lambda d, t: calls.append((d, t)), log=said.append)
+    assert calls[-1] == (8, 8)
+    assert "frames 0-5: a pass goes on where the other lost the body" in said
+    np.testing.assert_allclose(res.joints3d, whole.joints3d, atol=1e-9)
+
+
 def test_cancel_keeps_the_frames_done(slow):
     done = []
     res = run(slow, "hybrid", particles=100, progress=lambda d, t: done.append(d),
