@@ -309,8 +309,10 @@ def take_backgrounds(tracker, source, views, frames, inside, state_at, log):
         for c, img in enumerate(source.colour(a.frame)):
             mask = cv2.dilate((renders_a[c].label >= 0).astype(np.uint8), kernel) > 0
             exclude[c].append((img, mask))
-    backgrounds = [estimate_background(imgs, exclude=exclude[c]) if len(imgs) >= 5 else None
-                   for c, imgs in enumerate(per_view)]
+    # one view per thread: the estimate is whole-image numpy and OpenCV work, outside the GIL
+    backgrounds = list(thread_pool("views", 2).map(
+        lambda c: estimate_background(per_view[c], exclude=exclude[c])
+        if len(per_view[c]) >= 5 else None, range(len(views))))
     use_bg = [bg is not None for bg in backgrounds]
     a0 = inside[0].frame
     r0 = tracker.render_views(state_at(a0), want=())
@@ -777,7 +779,8 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
                     resume_from[job] = (at, before, part[at][0])
                     more[job] = (start, stop)
         if more:
-            log(f"{len(more)} passes go on where their partner lost the body")
+            log(f"{len(more)} pass{'es go' if len(more) > 1 else ' goes'} on where the other "
+                "lost the body")
             total += sum(abs(job[1] - job[2]) for job in more)
             extra, cancelled = run_jobs(list(more), total)
             for job, out in extra.items():

@@ -351,7 +351,7 @@ def test_a_pass_goes_on_where_its_partner_lost_the_body(take, monkeypatch):
     res = T.track(frozen, anchors, cams, init=init, blend_reach=1,
                   progress=lambda d, t: calls.append((d, t)), log=said.append)
     assert asked == [([1, 2, 3, 4], [2, 3, 4, 5, 6], 2, 4)]
-    assert "2 passes go on where their partner lost the body" in said
+    assert "2 passes go on where the other lost the body" in said
     assert calls[-1] == (12, 12)
     # the passes went on from where they stopped: the poses of whole passes, blended over
     # the whole stretch (only the limb search's draws differ)
