@@ -491,8 +491,12 @@ def check_take(plates, anchors, cameras, frames, offsets):
     return views, offsets, frames, inside
 
 
-def _run_in_turn(run, jobs, progress, cancel, total):
-    """Run the passes one after the other; a cancel keeps the frames tracked so far."""
+def _run_in_turn(run, jobs, progress, cancel, then=None):
+    """Run the passes one after the other; a cancel keeps the frames tracked so far.
+
+    ``progress(n)`` gets the frames tracked so far; ``then(job, frames)``, called as each pass
+    ends, returns the passes to run after it (:func:`track`'s passes that go on).
+    """
     results = {}
     done = 0
 
@@ -500,14 +504,18 @@ def _run_in_turn(run, jobs, progress, cancel, total):
         nonlocal done
         done += n
         if progress is not None:
-            progress(done, total)
+            progress(done)
 
-    for job in jobs:
+    queue = list(jobs)
+    while queue:
+        job = queue.pop(0)
         try:
             results[job] = run(job, report, cancel)
         except Cancelled as exc:
             results[job] = exc.args[0]
             return results, True
+        if then is not None:
+            queue += then(job, results[job])
     return results, False
 
 
@@ -534,6 +542,16 @@ def _can_fork():
 _FORKED = None      # (run, counter, stop event): what a forked worker runs
 
 
+class _Resume:
+    """Where a pass that goes on stopped: the frame, the pose before it and the pose at it.
+    Hashable by identity, so that a job holding it keys the results."""
+
+    __slots__ = ("frame", "before", "state")
+
+    def __init__(self, frame, before, state):
+        self.frame, self.before, self.state = frame, before, state
+
+
 def _ignore_interrupt():
     """Ctrl-C reaches the whole process group: the parent turns it into a polite stop."""
     import signal
@@ -554,9 +572,11 @@ def _forked_pass(job):
         return exc.args[0], True
 
 
-def _run_in_processes(run, jobs, workers, progress, cancel, total):
+def _run_in_processes(run, jobs, workers, progress, cancel, then=None):
     """Run independent passes in forked worker processes (they inherit the plates, the
-    background models and the tracker), polling progress and cancel every quarter second."""
+    background models and the tracker), polling progress and cancel every quarter second.
+    ``progress`` and ``then`` as in :func:`_run_in_turn`: a pass ``then`` returns starts as
+    soon as a worker is free."""
     import multiprocessing
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 
@@ -576,10 +596,16 @@ def _run_in_processes(run, jobs, workers, progress, cancel, total):
                                              return_when=FIRST_COMPLETED)
                     for fut in finished:
                         out, was_cancelled = fut.result()
-                        results[futures[fut]] = out
+                        job = futures[fut]
+                        results[job] = out
                         cancelled |= was_cancelled
+                        if then is not None and not (cancelled or stop.is_set()):
+                            for new in then(job, out):
+                                started = pool.submit(_forked_pass, new)
+                                futures[started] = new
+                                pending.add(started)
                     if progress is not None:
-                        progress(counter.value, total)
+                        progress(counter.value)
                     if cancel is not None and not stop.is_set() and cancel():
                         stop.set()
             except BaseException:
@@ -690,16 +716,14 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
         states[a] = state_at(a)
         reports[a] = None
 
-    resume_from = {}    # job -> (frame, state before it, state at it): a pass that goes on
-
     def run(job, report, should_stop):
         """Track from anchor ``job[0]`` to frame ``job[1]`` (inclusive), either direction; a
-        third item is the frame where an earlier part of the same pass stopped."""
+        third item (:class:`_Resume`) is where an earlier part of the same pass stopped."""
         start, stop = job[:2]
         step = 1 if stop > start else -1
         # each pass draws its own search samples: the same result whichever runs first
         if tracker.search is not None:
-            tracker.search.reseed(job)
+            tracker.search.reseed(job[:2] if len(job) == 2 else (*job[:2], job[2].frame))
         st = state_at(start)
         ims = images(start)
         renders = tracker.render_views(st)
@@ -707,7 +731,7 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
         prev = None
         first = start
         if len(job) > 2:
-            first, prev, st = resume_from[job]
+            first, prev, st = job[2].frame, job[2].before, job[2].state
             ims = images(first)
             renders = tracker.render_views(st)
         out = {}
@@ -726,25 +750,6 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
             report(1)
         return out
 
-    done = 0
-
-    def run_jobs(jobs, total):
-        """Run passes (in worker processes when there are several); progress counts on."""
-        # longest first: even out the workers
-        jobs = sorted(jobs, key=lambda job: -abs(job[1] - (job[2] if len(job) > 2 else job[0])))
-        base = done
-
-        def counted(n, _total):
-            nonlocal done
-            done = base + n
-            if progress is not None:
-                progress(done, total)
-
-        if workers > 1 and len(jobs) > 1 and _can_fork():
-            log(f"tracking {len(jobs)} passes in {min(workers, len(jobs))} processes")
-            return _run_in_processes(run, jobs, min(workers, len(jobs)), counted, cancel, total)
-        return _run_in_turn(run, jobs, counted, cancel, total)
-
     def blended_fit(state, frame):
         """Silhouette fit and overlap of a blended pose, measured anew: they are not either
         pass's."""
@@ -752,39 +757,61 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
                                    limbs=calibrated)
 
     # First the single passes and, between two anchors, each pass up to a little past the
-    # middle; then the passes whose partner lost the body on the way go on towards it.
+    # middle; as soon as both of a pair are done, a pass whose partner lost the body on the
+    # way goes on towards it.
     pairs = {(a, b): blend_stretch(a, b, blend_reach) for a, b, kind in passes if kind == "blend"}
     jobs = [(a, b) for a, b, kind in passes if kind != "blend"]
+    part_of = {}        # job -> the pass (from anchor, to anchor) it belongs to
     for (a, b), (lo, hi) in pairs.items():
         jobs += [(a, hi), (b, lo)]
+        part_of[(a, hi)], part_of[(b, lo)] = (a, b), (b, a)
     total = sum(abs(b - a) for a, b in jobs)
-    results, cancelled = run_jobs(jobs, total)
-    tracked = {}        # pass (from, to) -> frame -> (state, report)
-    for (a, b), (lo, hi) in pairs.items():
-        tracked[(a, b)], tracked[(b, a)] = results.get((a, hi), {}), results.get((b, lo), {})
-    for a, b, kind in passes:
-        if kind != "blend":
-            tracked[(a, b)] = results.get((a, b), {})
-    if not cancelled:
-        more = {}       # job -> the pass it continues
-        for (a, b), (lo, hi) in pairs.items():
-            fwd, bwd = tracked[(a, b)], tracked[(b, a)]
-            to_f, to_b = extend_passes({f: r for f, (_, r) in fwd.items()},
-                                       {f: r for f, (_, r) in bwd.items()}, lo, hi, blend_reach)
-            for (start, stop), part, at, to in (((a, b), fwd, hi, to_f), ((b, a), bwd, lo, to_b)):
-                if to != at:
-                    step = 1 if stop > start else -1
-                    before = part[at - step][0] if at - step != start else state_at(start)
-                    job = (start, to, at)
-                    resume_from[job] = (at, before, part[at][0])
-                    more[job] = (start, stop)
+    tracked = {(a, b): {} for a, b, _ in passes}    # pass -> frame -> (state, report)
+    tracked.update({(b, a): {} for a, b in pairs})
+
+    def then(job, out):
+        nonlocal total
+        tracked[part_of.get(job, job[:2])].update(out)
+        pair = part_of.get(job)
+        if pair is None or len(job) > 2:
+            return []
+        a, b = min(pair), max(pair)
+        lo, hi = pairs[(a, b)]
+        fwd, bwd = tracked[(a, b)], tracked[(b, a)]
+        if hi not in fwd or lo not in bwd:
+            return []       # the other pass is still running
+        to_f, to_b = extend_passes({f: r for f, (_, r) in fwd.items()},
+                                   {f: r for f, (_, r) in bwd.items()}, lo, hi, blend_reach)
+        more = []
+        for (start, stop), part, at, to in (((a, b), fwd, hi, to_f), ((b, a), bwd, lo, to_b)):
+            if to != at:
+                step = 1 if stop > start else -1
+                before = part[at - step][0] if at - step != start else state_at(start)
+                job = (start, to, _Resume(at, before, part[at][0]))
+                part_of[job] = (start, stop)
+                more.append(job)
+                total += abs(to - at)
         if more:
-            log(f"{len(more)} pass{'es go' if len(more) > 1 else ' goes'} on where the other "
-                "lost the body")
-            total += sum(abs(job[1] - job[2]) for job in more)
-            extra, cancelled = run_jobs(list(more), total)
-            for job, out in extra.items():
-                tracked[more[job]].update(out)
+            log(f"frames {a}-{b}: {len(more)} pass{'es go' if len(more) > 1 else ' goes'} on "
+                "where the other lost the body")
+        return more
+
+    def counted(n):
+        if progress is not None:
+            progress(n, total)
+
+    # longest first: even out the workers
+    jobs.sort(key=lambda job: -abs(job[1] - job[0]))
+    if workers > 1 and len(jobs) > 1 and _can_fork():
+        log(f"tracking {len(jobs)} passes in {min(workers, len(jobs))} processes")
+        results, cancelled = _run_in_processes(run, jobs, min(workers, len(jobs)), counted,
+                                               cancel, then)
+    else:
+        results, cancelled = _run_in_turn(run, jobs, counted, cancel, then)
+    if cancelled:
+        # what the passes tracked before the cancel reached them
+        for job, out in results.items():
+            tracked[part_of.get(job, job[:2])].update(out)
 
     for a, b, kind in passes:
         fwd, bwd = tracked[(a, b)], tracked.get((b, a), {})

@@ -351,11 +351,18 @@ def test_a_pass_goes_on_where_its_partner_lost_the_body(take, monkeypatch):
     res = T.track(frozen, anchors, cams, init=init, blend_reach=1,
                   progress=lambda d, t: calls.append((d, t)), log=said.append)
     assert asked == [([1, 2, 3, 4], [2, 3, 4, 5, 6], 2, 4)]
-    assert "2 passes go on where the other lost the body" in said
+    assert "frames 0-7: 2 passes go on where the other lost the body" in said
     assert calls[-1] == (12, 12)
     # the passes went on from where they stopped: the poses of whole passes, blended over
     # the whole stretch (only the limb search's draws differ)
     np.testing.assert_allclose(res.joints3d, full.joints3d, atol=1e-4)
+    if T._can_fork():
+        # in worker processes the passes that go on start as soon as their pair is done
+        calls = []
+        forked = T.track(frozen, anchors, cams, init=init, blend_reach=1, workers=2,
+                         progress=lambda d, t: calls.append((d, t)))
+        assert calls[-1] == (12, 12)
+        assert np.array_equal(forked.joints3d, res.joints3d)
 
 
 def test_extend_passes_follows_the_lost_pass():
