@@ -17,6 +17,7 @@ starts), peak memory and the largest limb overlap (mm, sphere proxies).
     .venv/bin/python benchmarks/bench_track.py            # all cases (several minutes)
     .venv/bin/python benchmarks/bench_track.py --quick    # 60 frames per case
     .venv/bin/python benchmarks/bench_track.py --cases walk3
+    .venv/bin/python benchmarks/bench_track.py --cases walk3-anchors --whole-passes
 """
 
 import argparse
@@ -110,7 +111,7 @@ def write_plates(scene, folder):
     return out
 
 
-def run_case(name, spec, *, quick, init_mode, anchor_every, workers=1):
+def run_case(name, spec, *, quick, init_mode, anchor_every, workers=1, whole_passes=False):
     from zoopraxis.core import track as T
 
     bvh, start, n, views, calibrated, noise, clutter, build, fps, every = spec
@@ -135,7 +136,8 @@ def run_case(name, spec, *, quick, init_mode, anchor_every, workers=1):
             raise SystemExit("--init truth needs calibrated cases")
         init = T.Initial(body, {f: p for f, p in zip(anchor_frames, poses)}, cams)
     t0 = time.perf_counter()
-    res = T.track(plates, anchors, cams, init=init, workers=workers)
+    reach = {"blend_reach": None} if whole_passes else {}
+    res = T.track(plates, anchors, cams, init=init, workers=workers, **reach)
     elapsed = time.perf_counter() - t0
     for plate in plates.values():
         plate.close()
@@ -180,6 +182,9 @@ def main(argv=None):
     p.add_argument("--workers", type=int, default=0,
                    help="processes for the passes of takes with several anchors (default: one "
                         "per core, at most 4, as `zoopraxis track`)")
+    p.add_argument("--whole-passes", action="store_true",
+                   help="track both passes between two anchors from anchor to anchor (the "
+                        "default stops each a little past the middle, track.BLEND_REACH)")
     args = p.parse_args(argv)
     from zoopraxis.core.track import default_workers
 
@@ -194,7 +199,8 @@ def main(argv=None):
     print("-" * len(header))
     for name in args.cases.split(","):
         r = run_case(name, CASES[name], quick=args.quick, init_mode=args.init,
-                     anchor_every=args.anchor_every, workers=workers)
+                     anchor_every=args.anchor_every, workers=workers,
+                     whole_passes=args.whole_passes)
         print(f"{r['case']:<14}{r['views']:>5} {r['mode']:>5}{r['anchors']:>5}{r['frames']:>7}{r['mpjpe']:>8.1f}"
               f"{r['pa']:>9.1f}{r['knee']:>7.1f}{r['elbow']:>7.1f}{r['lost']:>5}"
               f"{r['uncertain']:>7}{r['off']:>7}{r['off_ok']:>6}{r['recovered']:>6}"

@@ -55,10 +55,10 @@ UNEXPLAINED_UNCERTAIN = 0.25
 # backward pass as far before it, and the two are blended over that stretch: each frame is
 # tracked from its nearer anchor, and far fewer frames are tracked than with two whole passes.
 # A pass whose quality (see blend_weights) falls below POOR_PASS before the stretch calls its
-# partner on towards its anchor. walk3 of bench_track, anchors every 100 frames, 2 processes:
-# whole passes 28.4 mm at 4.9 fps; 15 frames 28.1 mm, 7.4 fps; 8 frames 28.0 mm, 8.6 fps.
-# 4 frames (25.6 mm, 10 fps) left a jump at a seam: a joint acceleration of 50 mm per frame^2,
-# where the walk's own reaches 22.
+# partner on towards its anchor. bench_track's walk3-anchors (anchors every 100 frames, 2
+# processes): whole passes (--whole-passes) 29.0 mm at 5.3 fps, 8 frames 28.0 mm at 8.9 fps;
+# 15 frames gave 28.1 mm. 4 frames (25.6 mm, 10 fps) left a jump at a seam: a joint
+# acceleration of 50 mm per frame^2, where the walk's own reaches 22.
 BLEND_REACH = 8
 POOR_PASS = 0.5
 
