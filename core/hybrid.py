@@ -54,8 +54,8 @@ from .motion_prior import SmoothMotionPrior, WalkingPrior, smooth_sigmas
 from .particle import ParticleFilter
 from .plates import to_gray_float
 from .track import (BLEND_REACH, Cancelled, FrameSource, Initial, blend_report, blend_states,
-                    blend_stretch, blend_weights, check_take, extend_passes, make_result,
-                    plan_passes, silhouette_measures, take_backgrounds)
+                    blend_weights, check_take, extend_passes, make_result, plan_passes,
+                    silhouette_measures, take_backgrounds)
 
 TRACKERS = ("particle", "hybrid")
 PRIORS = ("smooth", "walk")
@@ -364,12 +364,7 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
                                  carry_moves=tracker == "particle")
 
     anchor_frames = [a.frame for a in inside]
-    passes, _ = plan_passes(anchor_frames, frames)
-    # Between two anchors each pass tracks to a little past the middle (track.BLEND_REACH).
-    stretches = {(a, b): blend_stretch(a, b, blend_reach) for a, b, kind in passes
-                 if kind == "blend"}
-    total = sum(abs(b - a) for a, b, kind in passes if kind != "blend")
-    total += sum(hi - a + b - lo for (a, b), (lo, hi) in stretches.items())
+    passes, total = plan_passes(anchor_frames, frames, blend_reach)
     done = 0
     seeds = iter(range(seed, seed + 7919 * (len(passes) * 2 + 1), 7919))
     # The search draws as many poses as the filter has particles, shared among the groups.
@@ -449,17 +444,17 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
     cancelled = False
     parts = []      # every pass's frames so far: kept on a cancel
     try:
-        for a, b, kind in passes:
+        for a, b, stretch in passes:
             fwd = {}
             parts.append(fwd)
-            if kind != "blend":
+            if stretch is None:
                 advance(run(a, b), fwd, b)
                 for f, item in fwd.items():
                     tracked.setdefault(f, item)
                 continue
             bwd = {}
             parts.append(bwd)
-            lo, hi = stretches[(a, b)]
+            lo, hi = stretch
             forward, backward = run(a, b), run(b, a)
             advance(forward, fwd, hi)
             advance(backward, bwd, lo)

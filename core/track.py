@@ -142,7 +142,7 @@ def blend_states(a, b, w):
     return out
 
 
-def plan_passes(anchor_frames, frames):
+def plan_passes(anchor_frames, frames, reach=BLEND_REACH):
     """The tracking passes of a take: from the first anchor back to the take's start, between
     each two anchors (forward, then backward, to be blended), and from the last anchor to the
     end.
@@ -152,22 +152,27 @@ def plan_passes(anchor_frames, frames):
     anchor_frames : list of int
         Sorted anchor frames inside ``frames``.
     frames : range
+    reach : int or None
+        Between two anchors, how far past the middle each pass tracks at first
+        (:func:`blend_stretch`).
 
     Returns
     -------
-    passes : list of (int, int, str or None)
-        ``(start, stop, kind)``, both ends included; kind "blend" between two anchors.
+    passes : list of (int, int, (int, int) or None)
+        ``(start, stop, stretch)``, both ends included. Between two anchors ``start < stop``
+        and ``stretch`` is the blended stretch ``(lo, hi)``: the forward pass tracks to
+        ``hi``, the backward one to ``lo``. None for a single pass.
     total : int
-        Frames the passes will track (a blended stretch counts twice): for progress.
+        Frames the passes track at first: for progress.
     """
     passes = []
     if anchor_frames[0] > frames.start:
         passes.append((anchor_frames[0], frames.start, None))
     for a, b in zip(anchor_frames[:-1], anchor_frames[1:]):
-        passes.append((a, b, "blend"))
+        passes.append((a, b, blend_stretch(a, b, reach)))
     if anchor_frames[-1] < frames.stop - 1:
         passes.append((anchor_frames[-1], frames.stop - 1, None))
-    total = sum(abs(b - a) * (2 if kind == "blend" else 1) for a, b, kind in passes)
+    total = sum(abs(b - a) if st is None else st[1] - a + b - st[0] for a, b, st in passes)
     return passes, total
 
 
@@ -709,7 +714,7 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
         return tracker.map_views(one, len(colours))
 
     anchor_frames = [a.frame for a in inside]
-    passes, _ = plan_passes(anchor_frames, frames)
+    passes, total = plan_passes(anchor_frames, frames, blend_reach)
 
     states, reports = {}, {}
     for a in anchor_frames:
@@ -759,13 +764,12 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
     # First the single passes and, between two anchors, each pass up to a little past the
     # middle; as soon as both of a pair are done, a pass whose partner lost the body on the
     # way goes on towards it.
-    pairs = {(a, b): blend_stretch(a, b, blend_reach) for a, b, kind in passes if kind == "blend"}
-    jobs = [(a, b) for a, b, kind in passes if kind != "blend"]
+    pairs = {(a, b): st for a, b, st in passes if st is not None}
+    jobs = [(a, b) for a, b, st in passes if st is None]
     part_of = {}        # job -> the pass (from anchor, to anchor) it belongs to
     for (a, b), (lo, hi) in pairs.items():
         jobs += [(a, hi), (b, lo)]
         part_of[(a, hi)], part_of[(b, lo)] = (a, b), (b, a)
-    total = sum(abs(b - a) for a, b in jobs)
     tracked = {(a, b): {} for a, b, _ in passes}    # pass -> frame -> (state, report)
     tracked.update({(b, a): {} for a, b in pairs})
 
@@ -813,11 +817,11 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
         for job, out in results.items():
             tracked[part_of.get(job, job[:2])].update(out)
 
-    for a, b, kind in passes:
+    for a, b, stretch in passes:
         fwd, bwd = tracked[(a, b)], tracked.get((b, a), {})
         inner = range(a + 1, b)
         both = [f for f in inner if f in fwd and f in bwd]
-        if kind == "blend" and both and all(f in fwd or f in bwd for f in inner):
+        if stretch is not None and both and all(f in fwd or f in bwd for f in inner):
             weights = blend_weights([fwd[f][1] for f in both], [bwd[f][1] for f in both])
             for f, w in zip(both, weights):
                 states[f] = blend_states(fwd[f][0], bwd[f][0], w)

@@ -322,6 +322,10 @@ def test_passes_between_anchors_meet_past_the_middle(take):
     scene, joints, body, poses = take
     assert T.blend_stretch(0, 100, 8) == (42, 58)
     assert T.blend_stretch(0, 7, None) == (1, 6) and T.blend_stretch(0, 7, 15) == (1, 6)
+    passes, total = T.plan_passes([10, 100, 200], range(0, 300), 8)
+    assert passes == [(10, 0, None), (10, 100, (47, 63)), (100, 200, (142, 158)),
+                      (200, 299, None)]
+    assert total == 10 + (53 + 53) + (58 + 58) + 99
     calls = []
     res = run(take, anchor_frames=(0, N - 1), blend_reach=1,
               progress=lambda d, t: calls.append((d, t)))
