@@ -275,6 +275,8 @@ def extend_passes(forward, backward, lo, hi, reach, poor=POOR_PASS, smooth=5):
         The first frame the backward pass must reach (``lo`` when it need not go on).
     """
     stretch = range(lo, hi + 1)
+    if not stretch:
+        return hi, lo       # adjacent anchors: nothing between them
     refs = _references([forward[f] for f in stretch], [backward[f] for f in stretch])
     backward_to, forward_to = lo, hi
     early = sorted(f for f in forward if f < lo)

@@ -380,6 +380,7 @@ def test_extend_passes_follows_the_lost_pass():
     forward = {f: good[f] for f in range(a + 1, hi + 1)}
     backward = {f: good[f] for f in range(lo, b)}
     assert T.extend_passes(forward, backward, lo, hi, reach) == (hi, lo)
+    assert T.extend_passes({}, {}, 8, 7, reach) == (7, 8)       # anchors at 7 and 8
     # the forward pass lost the body from frame 12 to 20 and found it again
     lost_fwd = {f: rep(12.0, 0.3) if 12 <= f <= 20 else r for f, r in forward.items()}
     forward_to, backward_to = T.extend_passes(lost_fwd, backward, lo, hi, reach)
