@@ -56,8 +56,8 @@ UNEXPLAINED_UNCERTAIN = 0.25
 # tracked from its nearer anchor, and far fewer frames are tracked than with two whole passes.
 # A pass whose quality (see blend_weights) falls below POOR_PASS before the stretch calls its
 # partner on towards its anchor. bench_track's walk3-anchors (anchors every 100 frames, 2
-# processes): whole passes (--whole-passes) 29.0 mm at 6.5 fps, 8 frames 28.0 mm at 10.2-10.7
-# fps; 15 frames gave 28.1 mm. 4 frames (25.6 mm, 10 fps) left a jump at a seam: a joint
+# processes): whole passes (--whole-passes) 29.0 mm at 5.3 fps, 8 frames 28.0 mm at 8.9 fps;
+# 15 frames gave 28.1 mm. 4 frames (25.6 mm, 10 fps) left a jump at a seam: a joint
 # acceleration of 50 mm per frame^2, where the walk's own reaches 22.
 BLEND_REACH = 8
 POOR_PASS = 0.5
@@ -593,12 +593,6 @@ def _run_in_processes(run, jobs, workers, progress, cancel, then=None):
     stop = ctx.Event()
     _FORKED = (run, counter, stop)
     results, cancelled = {}, False
-    # One OpenCV thread per worker: the workers already fill the cores, and OpenCV's own
-    # threads on top of them cost walk3-anchors of bench_track a tenth of its speed (9.4 ->
-    # 10.2-10.7 fps). Set before the workers fork: a forked worker must not reconfigure
-    # OpenCV's threads (it waits for threads it does not have).
-    cv_threads = cv2.getNumThreads()
-    cv2.setNumThreads(1)
     try:
         with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_ignore_interrupt) as pool:
             futures = {pool.submit(_forked_pass, job): job for job in jobs}
@@ -628,7 +622,6 @@ def _run_in_processes(run, jobs, workers, progress, cancel, then=None):
                 raise
     finally:
         _FORKED = None
-        cv2.setNumThreads(cv_threads)
     return results, cancelled or stop.is_set()
 
 
