@@ -56,9 +56,9 @@ UNEXPLAINED_UNCERTAIN = 0.25
 # tracked from its nearer anchor, and far fewer frames are tracked than with two whole passes.
 # A pass whose quality (see blend_weights) falls below POOR_PASS before the stretch calls its
 # partner on towards its anchor. bench_track's walk3-anchors (anchors every 100 frames, 2
-# processes): whole passes (--whole-passes) 29.0 mm at 5.3 fps, 8 frames 28.0 mm at 8.9 fps;
-# 15 frames gave 28.1 mm. 4 frames (25.6 mm, 10 fps) left a jump at a seam: a joint
-# acceleration of 50 mm per frame^2, where the walk's own reaches 22.
+# processes), runs alternated: whole passes (--whole-passes) 29.0 mm at 5.6-7.2 fps, 8 frames
+# 28.0 mm at 10.3-12.0 fps. 15 frames gave 28.1 mm; 4 frames 25.6 mm, but left a jump at a
+# seam: a joint acceleration of 50 mm per frame^2, where the walk's own reaches 22.
 BLEND_REACH = 8
 POOR_PASS = 0.5
 
