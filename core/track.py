@@ -770,8 +770,9 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
     jobs = [(a, b) for a, b, st in passes if st is None]
     part_of = {}        # job -> the pass (from anchor, to anchor) it belongs to
     for (a, b), (lo, hi) in pairs.items():
-        jobs += [(a, hi), (b, lo)]
-        part_of[(a, hi)], part_of[(b, lo)] = (a, b), (b, a)
+        if lo <= hi:        # adjacent anchors have nothing between them
+            jobs += [(a, hi), (b, lo)]
+            part_of[(a, hi)], part_of[(b, lo)] = (a, b), (b, a)
     tracked = {(a, b): {} for a, b, _ in passes}    # pass -> frame -> (state, report)
     tracked.update({(b, a): {} for a, b in pairs})
 

@@ -336,6 +336,10 @@ def test_passes_between_anchors_meet_past_the_middle(take):
     assert error.max() < 0.06
     # blended frames carry limb scores measured on the blended pose; the others their pass's
     assert all(res.extra["limb_fit"][f] for f in (2, 3, 4))
+    # adjacent anchors have nothing between them: 2..7 alone is tracked, 3..6 both ways
+    calls = []
+    res = run(take, anchor_frames=(0, 1, 2, N - 1), progress=lambda d, t: calls.append((d, t)))
+    assert calls[-1] == (8, 8) and list(res.frames) == list(range(N))
 
 
 def test_a_pass_goes_on_where_its_partner_lost_the_body(take, monkeypatch):
