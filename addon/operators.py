@@ -8,7 +8,8 @@ the console and leaves the scene in Object mode.
 from pathlib import Path
 
 import bpy
-from bpy.props import BoolProperty, CollectionProperty, FloatProperty, StringProperty
+from bpy.props import (BoolProperty, CollectionProperty, FloatProperty, IntProperty,
+                       StringProperty)
 from bpy_extras.io_utils import ExportHelper, ImportHelper
 
 from ..core.errors import ZoopraxisError
@@ -264,6 +265,15 @@ class ZOOPRAXIS_OT_initialize(JobOperator, bpy.types.Operator):
         warnings = list(getattr(init, "warnings", []) or [])
         for w in warnings:
             print(f"zoopraxis initialize: warning: {w}")
+            self.report({'WARNING'}, w)
+        # What the panel shows: the warnings, and the frames whose depth the animator may
+        # judge by eye and flip.
+        settings.init_notes = "\n".join(warnings)
+        settings.one_view_frames = ",".join(
+            str(a.frame) for a in self._take.anchors if a.frame in init.poses
+            and sum(1 for v in a.views if a.joint_count(v)) == 1)
+        settings.ambiguous_parts = pipeline.format_flips(
+            getattr(init, "ambiguous_parts", {}) or {})
         return (f"Initialized at {len(init.poses)} anchor frame(s), click error up to "
                 f"{worst:.1f} px" + (f", {len(warnings)} warning(s)" if warnings else ""))
 
@@ -271,6 +281,42 @@ class ZOOPRAXIS_OT_initialize(JobOperator, bpy.types.Operator):
         take = getattr(self, "_take", None)
         if take is not None:
             take.close()
+
+
+class ZOOPRAXIS_OT_flip_depth(bpy.types.Operator):
+    """Turn a limb (or the whole body) of an anchor frame clicked in one view to its other
+    depth, or back, and initialize again: one view cannot tell a limb pointing towards the
+    camera from one pointing away"""
+    bl_idname = "zoopraxis.flip_depth"
+    bl_label = "Flip in Depth"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    frame: IntProperty(name="Frame", description="Take frame of the anchor")
+    part: StringProperty(name="Part", description="left arm, right arm, left leg, right leg "
+                                                  "or body")
+
+    def execute(self, context):
+        from ..core.initialize import FLIP_PARTS
+        from . import pipeline
+
+        settings = context.scene.zoopraxis
+        if self.part not in FLIP_PARTS:
+            self.report({'ERROR'}, f"unknown body part '{self.part}' (one of: "
+                                   f"{', '.join(FLIP_PARTS)})")
+            return {'CANCELLED'}
+        if settings.running:
+            self.report({'ERROR'}, "another Zoopraxis job is running (Esc stops it)")
+            return {'CANCELLED'}
+        flips = pipeline.parse_flips(settings.depth_flips)
+        parts = flips.setdefault(self.frame, [])
+        if self.part in parts:
+            parts.remove(self.part)
+        else:
+            parts.append(self.part)
+        settings.depth_flips = pipeline.format_flips({f: p for f, p in flips.items() if p})
+        how = 'INVOKE_DEFAULT' if context.window is not None and not bpy.app.background \
+            else 'EXEC_DEFAULT'
+        return bpy.ops.zoopraxis.initialize(how)
 
 
 class ZOOPRAXIS_OT_track(JobOperator, bpy.types.Operator):
@@ -450,7 +496,7 @@ classes = (
     ZOOPRAXIS_OT_load_plates, ZOOPRAXIS_OT_remove_view, ZOOPRAXIS_OT_add_joint_markers,
     ZOOPRAXIS_OT_export_markers, ZOOPRAXIS_OT_import_markers, ZOOPRAXIS_OT_load_calibration,
     ZOOPRAXIS_OT_export_calibration, ZOOPRAXIS_OT_calibrate_board, ZOOPRAXIS_OT_initialize,
-    ZOOPRAXIS_OT_track, ZOOPRAXIS_OT_jump_worst_frame, ZOOPRAXIS_OT_bake,
+    ZOOPRAXIS_OT_flip_depth, ZOOPRAXIS_OT_track, ZOOPRAXIS_OT_jump_worst_frame, ZOOPRAXIS_OT_bake,
     ZOOPRAXIS_OT_export_bvh, ZOOPRAXIS_OT_export_fbx, ZOOPRAXIS_OT_bone_map_add,
     ZOOPRAXIS_OT_bone_map_remove, ZOOPRAXIS_OT_bone_map_load,
 )

@@ -4,9 +4,14 @@ The 3D View panel walks through the steps Plates -> Calibration -> Markers -> In
 Track -> Bake/Export; each step says what is missing before it can run.
 """
 
+import textwrap
+
 import bpy
 
 from ..core.joints import STANDARD_JOINTS
+
+# Characters of a warning per line in the sidebar (labels do not wrap).
+NOTE_WIDTH = 46
 
 
 def missing_for(context):
@@ -77,6 +82,32 @@ class ZOOPRAXIS_UL_bone_map(bpy.types.UIList):
             row.prop(item, "bone", text="")
 
 
+def _draw_init_notes(box, settings):
+    """The last initialization's warnings, and per anchor frame clicked in one view a toggle
+    per limb to turn it to its other depth (the ambiguous ones marked)."""
+    from .pipeline import parse_flips
+
+    for note in filter(None, settings.init_notes.split("\n")):
+        col = box.column(align=True)
+        for i, line in enumerate(textwrap.wrap(note, NOTE_WIDTH)):
+            col.label(text=line, icon='ERROR' if i == 0 else 'BLANK1')
+    frames = [int(f) for f in settings.one_view_frames.split(",") if f.strip().isdigit()]
+    if not frames:
+        return
+    flips = parse_flips(settings.depth_flips)
+    ambiguous = parse_flips(settings.ambiguous_parts)
+    box.label(text="Seen in one view: flip what looks wrong in depth")
+    for frame in frames:
+        row = box.row(align=True)
+        row.label(text=f"Frame {frame}")
+        for part, text in (("left arm", "L Arm"), ("right arm", "R Arm"), ("left leg", "L Leg"),
+                           ("right leg", "R Leg"), ("body", "Body")):
+            op = row.operator("zoopraxis.flip_depth", text=text,
+                              icon='ERROR' if part in ambiguous.get(frame, ()) else 'NONE',
+                              depress=part in flips.get(frame, ()))
+            op.frame, op.part = frame, part
+
+
 class VIEW3D_PT_zoopraxis(bpy.types.Panel):
     bl_label = "Zoopraxis"
     bl_space_type = 'VIEW_3D'
@@ -126,6 +157,7 @@ class VIEW3D_PT_zoopraxis(bpy.types.Panel):
         sub = box.row()
         sub.enabled = missing["initialize"] is None and not settings.running
         sub.operator("zoopraxis.initialize", icon='POSE_HLT')
+        _draw_init_notes(box, settings)
 
         box = _step(layout, "5. Track", 'TRACKING', missing["track"])
         box.prop(settings, "tracker")

@@ -64,6 +64,7 @@ class Take:
     num_frames: int
     fps: float = 30.0
     extra: dict = field(default_factory=dict)
+    flips: dict = None      # anchor frame -> body parts the animator turned in depth
 
     def close(self):
         for plate in self.plates.values():
@@ -112,8 +113,30 @@ def gather(context, *, need_markers=True):
             plate.close()
         raise
     fps = scene.render.fps / scene.render.fps_base
+    anchor_frames = {a.frame for a in anchors}
+    flips = {f: p for f, p in parse_flips(settings.depth_flips).items() if f in anchor_frames}
     return Take(plates, paths, offsets, anchors, cameras, frames, settings.template.lower(),
-                settings.tracker.lower(), n, fps)
+                settings.tracker.lower(), n, fps, flips=flips or None)
+
+
+def parse_flips(text):
+    """``"80:left leg;80:body"`` -> ``{80: ["left leg", "body"]}`` (unreadable items are
+    dropped: the text is the add-on's own)."""
+    out = {}
+    for item in str(text or "").split(";"):
+        frame, _, part = item.partition(":")
+        try:
+            frame = int(frame)
+        except ValueError:
+            continue
+        if part and part not in out.setdefault(frame, []):
+            out[frame].append(part)
+    return {f: p for f, p in out.items() if p}
+
+
+def format_flips(flips):
+    """The inverse of :func:`parse_flips`."""
+    return ";".join(f"{f}:{p}" for f, parts in sorted(flips.items()) for p in parts)
 
 
 def initialize(take, *, progress=None, cancel=None):
@@ -125,7 +148,9 @@ def initialize(take, *, progress=None, cancel=None):
     cameras = take.cameras if take.cameras is not None else \
         {v: p.image_size for v, p in take.plates.items()}
     result = call(module.initialize, inside, cameras, template=take.template,
-                  calibrated=take.cameras is not None, views=list(take.plates))
+                  calibrated=take.cameras is not None, views=list(take.plates),
+                  flips={f: p for f, p in (take.flips or {}).items()
+                         if f in {a.frame for a in inside}} or None)
     if progress:
         progress(1, 1)
     return result
@@ -139,7 +164,8 @@ def _fingerprint(take):
                    for j, (u, w) in sorted(joints.items()))
     cameras = None if take.cameras is None else tuple(
         (v, tuple(round(x, 6) for x in c.P.ravel())) for v, c in sorted(take.cameras.items()))
-    return take.template, cameras, clicks
+    flips = tuple(sorted((f, tuple(p)) for f, p in (take.flips or {}).items()))
+    return take.template, cameras, clicks, flips
 
 
 def remember_initial(scene, init, take):
@@ -163,6 +189,10 @@ def track(take, *, init=None, progress=None, cancel=None, log=None):
     """Track the take (:func:`core.track.track`, or the particle/hybrid trackers)."""
     options = dict(frames=take.frames, offsets=take.offsets, template=take.template, init=init,
                    progress=progress, cancel=cancel, log=log)
+    inside = {a.frame for a in take.anchors if a.frame in take.frames}
+    flips = {f: p for f, p in (take.flips or {}).items() if f in inside}
+    if flips and init is None:
+        options["flips"] = flips
     if take.tracker == "differential":
         module = _import("track", "the differential tracker")
         return call(module.track, take.plates, take.anchors, take.cameras, **options)

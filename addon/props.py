@@ -98,6 +98,20 @@ class ZOOPRAXIS_PG_settings(bpy.types.PropertyGroup):
     status: StringProperty(name="Status")
     progress: FloatProperty(name="Progress", min=0.0, max=1.0, subtype='FACTOR')
     initialized: BoolProperty(name="Initialized")
+    init_notes: StringProperty(name="Initialization Notes",
+                               description="Warnings of the last initialization, one a line")
+    one_view_frames: StringProperty(
+        name="Frames Clicked in One View",
+        description="Anchor frames of the last initialization clicked in one view only "
+                    "(comma separated): their limbs' depth is a guess the animator may flip")
+    ambiguous_parts: StringProperty(
+        name="Ambiguous Parts",
+        description="FRAME:PART;... that another depth fits about as well (last "
+                    "initialization)")
+    depth_flips: StringProperty(
+        name="Depth Flips",
+        description="FRAME:PART;... turned to their other depth by the animator (used by "
+                    "Initialize and Track)")
 
     armature: PointerProperty(name="Armature", type=bpy.types.Object, poll=_is_armature,
                               description="Armature of the last bake")

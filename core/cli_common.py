@@ -28,6 +28,24 @@ def parse_view_values(items, what, convert=str):
     return out
 
 
+def parse_flips(items):
+    """``--flip FRAME:PART`` options as ``{frame: [part, ...]}`` (None when there are none).
+
+    Raises
+    ------
+    ZoopraxisError
+        An option that is not FRAME:PART with a known part.
+    """
+    from .initialize import parse_flip
+
+    out = {}
+    for item in items or ():
+        frame, part = parse_flip(item)
+        if part not in out.setdefault(frame, []):
+            out[frame].append(part)
+    return out or None
+
+
 def add_output_arguments(parser, what):
     """``--out`` (the file to write, described by ``what``) and ``--force``."""
     parser.add_argument("--out", required=True, help=f"{what} to write")

@@ -4,7 +4,7 @@ import argparse
 import json
 import sys
 
-from .cli_common import add_output_arguments, check_output
+from .cli_common import add_output_arguments, check_output, parse_flips
 from .errors import ZoopraxisError
 
 
@@ -26,6 +26,10 @@ def build_parser():
     p.add_argument("--no-pose-prior", action="store_true",
                    help="in frames clicked in one view, choose the limbs' depth without the "
                         "pose prior learned from motion capture")
+    p.add_argument("--flip", action="append", default=[], metavar="FRAME:PART",
+                   help="at an anchor frame clicked in one view, turn a body part to its other "
+                        "depth (PART: left-arm, right-arm, left-leg, right-leg or body); "
+                        "repeat for more")
     add_output_arguments(p, "init.json")
     return p
 
@@ -43,6 +47,7 @@ def main(argv):
     if args.template not in TEMPLATES:
         raise ZoopraxisError(f"--template: unknown body template '{args.template}' (expected "
                              f"one of {', '.join(TEMPLATES)})")
+    flips = parse_flips(args.flip)
     plates = open_plates(parse_plate_options(args.plate))
     views = list(plates)
     anchors = read_markers(args.markers)
@@ -63,15 +68,22 @@ def main(argv):
           flush=True)
     result = initialize(anchors, cameras, template=args.template,
                         calibrated=bool(args.calibration), fit_dims=not args.fixed_dims,
-                        views=views, pose_prior=None if args.no_pose_prior else "default")
+                        views=views, pose_prior=None if args.no_pose_prior else "default",
+                        flips=flips)
     print("body dimensions (m): " + ", ".join(f"{name} {result.body.dims[name]:.3f}"
                                              for name in LENGTH_DIMS))
     print("rms per view (px): " + ", ".join(f"{view} {rms:.2f}"
                                            for view, rms in result.rms.items()))
     for warning in result.warnings:
         print(f"warning: {warning}")
+    for frame, parts in sorted(result.flipped.items()):
+        print(f"frame {frame}: flipped in depth: {', '.join(parts)}")
     if result.ambiguous:
         print("warning: the 3D pose is ambiguous (see above)")
+    for frame, parts in sorted(result.ambiguous_parts.items()):
+        options = " ".join(f"--flip {frame}:{p.replace(' ', '-')}" for p in parts)
+        print(f"frame {frame}: look at the fitted body; if it is wrong there, run again with "
+              f"{options}")
     text = json.dumps(result.to_json(), indent=1)
     try:
         out.write_text(text + "\n")

@@ -3,7 +3,8 @@
 import argparse
 import time
 
-from .cli_common import add_output_arguments, check_output, open_plates, parse_view_values
+from .cli_common import (add_output_arguments, check_output, open_plates, parse_flips,
+                         parse_view_values)
 from .errors import ZoopraxisError
 from .progress import ConsoleProgress
 
@@ -38,6 +39,10 @@ def build_parser():
                    help="after tracking, refine the limb lengths on the silhouettes and clicks "
                         "of the whole take and track again, keeping the better track "
                         "(differential tracker, calibrated views)")
+    p.add_argument("--flip", action="append", default=[], metavar="FRAME:PART",
+                   help="at an anchor frame clicked in one view, turn a body part to its other "
+                        "depth (PART: left-arm, right-arm, left-leg, right-leg or body); "
+                        "repeat for more")
     add_output_arguments(p, "result.json")
     return p
 
@@ -68,8 +73,9 @@ def main(argv):
         raise ZoopraxisError("--refine-body works with --tracker differential only")
     if args.refine_body and cameras is None:
         raise ZoopraxisError("--refine-body needs --calibration (calibrated views)")
+    flips = parse_flips(args.flip)
     stop = _StopOnInterrupt()
-    kwargs = dict(frames=frames, offsets=offsets, template=args.template,
+    kwargs = dict(frames=frames, offsets=offsets, template=args.template, flips=flips,
                   max_size=args.max_size, progress=ConsoleProgress("track"), cancel=stop,
                   log=lambda msg: print(f"track: {msg}", flush=True))
     t0 = time.perf_counter()

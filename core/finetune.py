@@ -453,7 +453,7 @@ def _sample_frames(result, n):
 
 def finetune(plates, anchors, cameras, *, result=None, init=None, frames=None, offsets=None,
              template="full", settings=None, max_size=960, backgrounds=None, samples=12,
-             iterations=10, progress=None, cancel=None, log=None):
+             iterations=10, progress=None, cancel=None, log=None, flips=None):
     """Track, refine the body's lengths on the images of the whole take, track again (§2.7).
 
     Parameters
@@ -519,7 +519,7 @@ def finetune(plates, anchors, cameras, *, result=None, init=None, frames=None, o
     inside = [a for a in anchors if frames.start <= a.frame < frames.stop]
     if init is None and inside:
         res = initialize(inside, {v: cameras[v] for v in views}, template=template,
-                         calibrated=True, views=views)
+                         calibrated=True, views=views, flips=flips)
         init = T.Initial(res.body, res.poses, res.cameras, None, list(res.warnings))
     # Progress over the whole job: a track's steps, the fit's steps, the re-track's steps.
     stage = {"base": 0, "steps": None}

@@ -225,7 +225,7 @@ def _worse(a, b):
 def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, seed=2345,
           frames=None, offsets=None, template="full", max_size=960, progress=None, cancel=None,
           log=None, init=None, settings=None, prior="smooth", recentre=RECENTRE,
-          prior_scale=None, layers=None, silhouette=None, blend_reach=BLEND_REACH):
+          prior_scale=None, layers=None, silhouette=None, blend_reach=BLEND_REACH, flips=None):
     """Track a take with the particle filter, alone or as the coarse stage of the hybrid.
 
     Parameters
@@ -322,7 +322,9 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
         from .initialize import initialize
 
         res = initialize(inside, {v: cameras[v] for v in views}, template=template,
-                         calibrated=True, views=views)
+                         calibrated=True, views=views, flips=flips)
+        for frame, parts in sorted(res.flipped.items()):
+            log(f"frame {frame}: flipped in depth: {', '.join(parts)}")
         init = Initial(res.body, res.poses, res.cameras, None, list(getattr(res, "warnings", [])))
     for w in init.warnings:
         log(f"warning: {w}")

@@ -116,6 +116,10 @@ BODY_PARTS = {"the trunk": ("neck", "l_shoulder", "r_shoulder", "l_hip", "r_hip"
               "the left leg": ("l_knee", "l_ankle", "l_toe"),
               "the right leg": ("r_knee", "r_ankle", "r_toe")}
 
+# What an animator may turn to its other depth in a frame clicked in one view: a limb (its best
+# other depth configuration) or the whole body (its mirror image in depth).
+FLIP_PARTS = ("left arm", "right arm", "left leg", "right leg", "body")
+
 # An alternative pose whose cost is within this many px^2 of the best one fits as well: under
 # clicks of CLICK_SIGMA_PX it is at most e times less likely.
 AMBIGUOUS_COST = CLICK_SIGMA_PX ** 2
@@ -1103,6 +1107,11 @@ class InitResult:
     calibrated : bool
     swapped : list of (int, str, str, str)
         ``(frame, view, joint, joint)`` click pairs fitted exchanged because they looked swapped.
+    ambiguous_parts : dict of int to list of str
+        Per anchor frame, the ``FLIP_PARTS`` that another depth would fit about as well: what
+        the animator may flip (``initialize(..., flips=...)``) after judging the result by eye.
+    flipped : dict of int to list of str
+        The flips asked for and made, per anchor frame.
     """
 
     body: object
@@ -1115,6 +1124,8 @@ class InitResult:
     ambiguous: bool
     calibrated: bool
     swapped: list = field(default_factory=list)
+    ambiguous_parts: dict = field(default_factory=dict)
+    flipped: dict = field(default_factory=dict)
 
     @property
     def dims(self):
@@ -1149,6 +1160,8 @@ class InitResult:
             "rms": {v: round(float(x), 3) for v, x in self.rms.items()},
             "warnings": list(self.warnings),
             "ambiguous": bool(self.ambiguous),
+            "ambiguous_parts": {str(f): list(p) for f, p in sorted(self.ambiguous_parts.items())},
+            "flipped": {str(f): list(p) for f, p in sorted(self.flipped.items())},
         }
 
 
@@ -1189,7 +1202,10 @@ def init_from_json(data, path="init.json"):
                       cameras=view_cameras[first] if first is not None else {},
                       view_cameras=None if calibrated else view_cameras, errors=errors,
                       rms=dict(data.get("rms", {})), warnings=list(data.get("warnings", [])),
-                      ambiguous=bool(data.get("ambiguous", False)), calibrated=calibrated)
+                      ambiguous=bool(data.get("ambiguous", False)), calibrated=calibrated,
+                      ambiguous_parts={int(f): list(p) for f, p in
+                                       dict(data.get("ambiguous_parts", {})).items()},
+                      flipped={int(f): list(p) for f, p in dict(data.get("flipped", {})).items()})
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1225,7 +1241,7 @@ def _seen_twice(anchor, views):
 
 
 def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None, fit_dims=True,
-               views=None, pose_prior="default"):
+               views=None, pose_prior="default", flips=None):
     """Pose, angles and body dimensions from the clicked joints of anchor frames (§2.6).
 
     Parameters
@@ -1253,6 +1269,11 @@ def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None,
         the shipped prior learned from motion capture (``"default"``, if there is one for the
         template), a given one, or none (then the angle prior of everyday poses alone
         decides).
+    flips : dict of int to list of str, optional
+        Per anchor frame clicked in one view, body parts (``FLIP_PARTS``: "left arm", ...,
+        "body") to turn to their other depth: the best fitting pose in which that limb lies
+        otherwise in depth (or the whole body's mirror image), even if it fits a little worse.
+        The animator's answer to a reported ambiguity (``InitResult.ambiguous_parts``).
 
     Returns
     -------
@@ -1261,9 +1282,11 @@ def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None,
     Raises
     ------
     ZoopraxisError
-        No anchors, a view without a camera, a frame with too few clicks.
+        No anchors, a view without a camera, a frame with too few clicks, a flip of an unknown
+        part or of a frame that is not an anchor.
     """
     anchors = sorted(anchors, key=lambda a: a.frame)
+    flips = check_flips(flips, [a.frame for a in anchors])
     frames = [a.frame for a in anchors]
     if len(set(frames)) != len(frames):
         raise ZoopraxisError(f"frame {next(f for f in frames if frames.count(f) > 1)} has two "
@@ -1310,7 +1333,60 @@ def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None,
                              f"not on '{template}'")
     fit.prior = None if pose_prior is None else \
         pose_prior.with_broad(kin.prior_mean, kin.prior_sigma)
+    fit.flips = flips
     return fit.run()
+
+
+def flip_part(name):
+    """A body part's name as ``FLIP_PARTS`` spell it ("the Left-Leg" -> "left leg"), or None."""
+    text = " ".join(str(name).lower().replace("-", " ").replace("_", " ").split())
+    if text.startswith("the "):
+        text = text[4:]
+    if text in ("whole body", "all"):
+        text = "body"
+    return text if text in FLIP_PARTS else None
+
+
+def check_flips(flips, frames):
+    """Flips as ``{frame: [part, ...]}`` with the parts' names checked.
+
+    Raises
+    ------
+    ZoopraxisError
+        An unknown part or a frame that is not an anchor frame.
+    """
+    out = {}
+    for frame, parts in (flips or {}).items():
+        if int(frame) not in frames:
+            raise ZoopraxisError(f"depth flip: frame {frame} is not an anchor frame (anchors: "
+                                 f"{', '.join(str(f) for f in frames) or 'none'})")
+        for part in ([parts] if isinstance(parts, str) else parts):
+            name = flip_part(part)
+            if name is None:
+                raise ZoopraxisError(f"depth flip at frame {frame}: unknown body part '{part}' "
+                                     f"(one of: {', '.join(FLIP_PARTS)})")
+            if name not in out.setdefault(int(frame), []):
+                out[int(frame)].append(name)
+    return out
+
+
+def parse_flip(text):
+    """``"80:left-leg"`` -> ``(80, "left leg")`` (the command line's ``--flip``).
+
+    Raises
+    ------
+    ZoopraxisError
+    """
+    frame, _, part = str(text).partition(":")
+    try:
+        frame = int(frame)
+    except ValueError:
+        frame = None
+    name = flip_part(part) if part else None
+    if frame is None or name is None:
+        raise ZoopraxisError(f"--flip '{text}': expected FRAME:PART, PART one of "
+                             f"{', '.join(p.replace(' ', '-') for p in FLIP_PARTS)}")
+    return frame, name
 
 
 def _image_size(cameras, view, uv):
@@ -1343,13 +1419,16 @@ class _Fit:
         self.ambiguous = False
         self.swapped = []
         self.prior = None       # PosePrior: the angle prior of frames seen in one view
+        self.flips = {}         # anchor frame -> FLIP_PARTS the animator turned
+        self.ambiguous_parts = {}
+        self.flipped = {}
 
     # Subclasses give start(f) -> _State of one frame (F = 1), options(state, f, fit_dims) ->
     # _Problem options, depth_direction(state, f) and mirrored(state, f) for frames seen in one
     # view (else None), and _cameras(state) -> (cameras, view_cameras).
 
     def run(self):
-        states = [self._frame(f) for f in range(len(self.frames))]
+        states = [self._apply_flips(self._frame(f), f) for f in range(len(self.frames))]
         state = self._merge(states)
         state, cost = self._solve_all(state)
         state = self._check_swaps(state, cost)
@@ -1389,6 +1468,7 @@ class _Fit:
             if moved and moved not in seen:
                 seen.append(moved)
                 self.ambiguous = True
+                self._note_ambiguous(f, moved)
                 self.warnings.append(
                     f"frame {self.frames[f]}: a pose with {_join(moved)} mirrored in depth "
                     f"fits about as well (cost {alt_cost:.1f} vs {cost:.1f} px^2); the 3D pose "
@@ -1506,6 +1586,7 @@ class _Fit:
             moved = self._moved_parts(best, alt)
             if moved and alt_score < best_score + 1.0:
                 self.ambiguous = True
+                self._note_ambiguous(f, moved)
                 self.warnings.append(
                     f"frame {self.frames[f]}: a pose with {_join(moved)} mirrored in depth "
                     f"fits about as well (clicks and pose prior: {alt_score:.1f} vs "
@@ -1581,6 +1662,88 @@ class _Fit:
         apart = np.linalg.norm(scale * Ya @ R.T + t - Yb, axis=-1)
         return [part for part, joints in BODY_PARTS.items()
                 if apart[[JOINT_INDEX[j] for j in joints]].max() > _AMBIGUOUS_M]
+
+    def _note_ambiguous(self, f, moved):
+        """Remember the parts (``FLIP_PARTS``) another depth of frame ``f`` moves."""
+        parts = self.ambiguous_parts.setdefault(self.frames[f], [])
+        whole = any(m in ("the trunk", "the head") for m in moved)
+        for name in ["body"] if whole else [m[len("the "):] for m in moved]:
+            if name not in parts:
+                parts.append(name)
+
+    def _posterior(self, state, f):
+        """Clicks (and the learned prior, if any) of a one-frame state, nats."""
+        clicks = float(self._click_costs(state, f, state.angles)[0]) / CLICK_SIGMA_PX**2
+        return clicks + (0.0 if self.prior is None else float(self.prior.cost(state.angles)[0]))
+
+    def _apply_flips(self, state, f):
+        """Turn the parts the animator named for frame ``f`` to their other depth."""
+        frame = self.frames[f]
+        for part in self.flips.get(frame, ()):
+            if self.depth_direction(state, f) is None:
+                self.warnings.append(f"frame {frame}: clicked in more than one view, so its "
+                                     f"depth is seen; the flip of the {part} is ignored")
+                continue
+            flipped = self._flip(state, f, part)
+            if flipped is None:
+                self.warnings.append(f"frame {frame}: the {part} lies across the view (its "
+                                     "other depth is the same pose); nothing to flip")
+                continue
+            before = float(self._click_costs(state, f, state.angles)[0])
+            after = float(self._click_costs(flipped, f, flipped.angles)[0])
+            clicks = int(np.isfinite(self.obs[f]).all(axis=-1).sum())
+            if after > 2.0 * before + clicks * CLICK_SIGMA_PX ** 2:
+                self.warnings.append(
+                    f"frame {frame}: no pose with the {part} at its other depth fits the "
+                    f"clicks (mean click error {np.sqrt(after / clicks):.1f} px against "
+                    f"{np.sqrt(before / clicks):.1f} px); not flipped")
+                continue
+            state = flipped
+            self.flipped.setdefault(frame, []).append(part)
+        return state
+
+    def _flip(self, state, f, part):
+        """The best fitting pose of a one-view frame with ``part`` at its other depth: the
+        limb's other depth configurations (upper part, lower part, both; posed by inverse
+        kinematics on the reflected joints) or the whole body's mirror, each fitted; None if
+        no such pose differs from ``state`` there."""
+        obs, w = self.obs[f:f + 1], self.weights[f:f + 1]
+        if part == "body":
+            wanted = None
+            trials = [self.mirrored(state, f)]
+            if trials[0] is not None and self.prior is not None:
+                # the mirror's limbs at either depth, chosen as for the fit itself (its notes
+                # of ambiguity are about the mirror, not the pose returned: left out)
+                kept, ambiguous = len(self.warnings), self.ambiguous
+                parts = {k: list(v) for k, v in self.ambiguous_parts.items()}
+                trial, _, _ = _fit(self.kin, obs, w, trials[0],
+                                   **self.options(trials[0], f, fit_dims=self.fit_dims))
+                trials.append(self._choose_by_prior([trial], f))
+                del self.warnings[kept:]
+                self.ambiguous, self.ambiguous_parts = ambiguous, parts
+        else:
+            side, limb = part.split()
+            pivot = f"{side[0]}_{'shoulder' if limb == 'arm' else 'hip'}"
+            variants, dofs = self._limb_variants(state, f)
+            i = [limb_[0] for limb_ in _FLIP_LIMBS].index(pivot)
+            trials, wanted = [], f"the {part}"
+            for angles, _ in variants[i][1:]:
+                trial = state.copy()
+                trial.angles[0, dofs[i]] = angles
+                trials.append(trial)
+        best = None
+        for trial in trials:
+            if trial is None:
+                continue
+            trial, _, _ = _fit(self.kin, obs, w, trial,
+                               **self.options(trial, f, fit_dims=self.fit_dims))
+            moved = self._moved_parts(state, trial)
+            if not moved or (wanted is not None and wanted not in moved):
+                continue        # the fit went back to the pose it came from
+            score = self._posterior(trial, f)
+            if best is None or score < best[0]:
+                best = (score, trial)
+        return None if best is None else best[1]
 
     def _merge(self, states):
         dims = np.median([s.dims for s in states], axis=0)
@@ -1705,7 +1868,10 @@ class _Fit:
         return InitResult(body=body, poses=poses, cameras=cameras, view_cameras=view_cameras,
                           errors=errors, rms=rms, warnings=self.warnings,
                           ambiguous=self.ambiguous, calibrated=self.calibrated,
-                          swapped=self.swapped)
+                          swapped=self.swapped,
+                          ambiguous_parts={k: list(v) for k, v in self.ambiguous_parts.items()
+                                           if v},
+                          flipped={k: list(v) for k, v in self.flipped.items()})
 
 
 def _join(words):
@@ -1943,9 +2109,12 @@ class _UncalibratedFit(_Fit):
         if self.prior is None or PRIOR_WEIGHT <= 0 or self.usable[f].sum() != 1:
             return super()._frame(f)
         kept, ambiguous = len(self.warnings), self.ambiguous
+        frame = self.frames[f]
+        parts = list(self.ambiguous_parts.get(frame, []))
         found = []
         for in_fit in (True, False):
             self._prior_in_fit, self.ambiguous = in_fit, ambiguous
+            self.ambiguous_parts[frame] = list(parts)
             try:
                 state = super()._frame(f)
             finally:
@@ -1953,11 +2122,15 @@ class _UncalibratedFit(_Fit):
             if not in_fit:
                 state, _, _ = _fit(self.kin, self.obs[f:f + 1], self.weights[f:f + 1], state,
                                    **self.options(state, f, fit_dims=self.fit_dims))
-            found.append((float(self._score(state, f, state.angles)[0]), state,
-                          self.warnings[kept:], self.ambiguous))
+            found.append((float(self._score(state, f, state.angles)[0]), len(found), state,
+                          self.warnings[kept:], self.ambiguous, self.ambiguous_parts[frame]))
             del self.warnings[kept:]
-        _, state, notes, self.ambiguous = min(found, key=lambda t: t[0])
+        _, _, state, notes, self.ambiguous, chosen = min(found, key=lambda t: t[:2])
         self.warnings += notes
+        if chosen:
+            self.ambiguous_parts[frame] = chosen
+        else:
+            self.ambiguous_parts.pop(frame, None)
         return state
 
     def start(self, f):

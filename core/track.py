@@ -627,7 +627,7 @@ def _run_in_processes(run, jobs, workers, progress, cancel, then=None):
 
 def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template="full",
           settings=None, init=None, max_size=960, progress=None, cancel=None, log=None,
-          workers=1, blend_reach=BLEND_REACH):
+          workers=1, blend_reach=BLEND_REACH, flips=None):
     """Track a take with the differential tracker.
 
     Parameters
@@ -653,6 +653,9 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
     blend_reach : int or None
         Between two anchors, how many frames past the middle each pass tracks at first
         (:data:`BLEND_REACH`); None tracks both passes from anchor to anchor.
+    flips : dict of int to list of str, optional
+        Body parts to turn to their other depth at anchor frames clicked in one view
+        (:func:`initialize.initialize`), when ``init`` is not given.
 
     Returns
     -------
@@ -668,7 +671,9 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
 
         res = initialize(inside, {v: cameras[v] if calibrated else tuple(plates[v].image_size)
                                   for v in views},
-                         template=template, calibrated=calibrated, views=views)
+                         template=template, calibrated=calibrated, views=views, flips=flips)
+        for frame, parts in sorted(res.flipped.items()):
+            log(f"frame {frame}: flipped in depth: {', '.join(parts)}")
         init = Initial(res.body, res.poses, res.cameras, getattr(res, "view_cameras", None),
                        list(getattr(res, "warnings", [])))
     for w in init.warnings:

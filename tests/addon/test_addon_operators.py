@@ -418,3 +418,69 @@ def test_real_pipeline_on_sample_tracks_and_bakes(blender, monkeypatch, tmp_path
     truth = np.array(json.loads((SAMPLE / "truth.json").read_text())["joints3d"])[:3]
     X = joint_positions(settings.armature, blender.scene, [1, 2, 3])
     assert np.median(np.linalg.norm(X - truth, axis=-1)) < 0.05
+
+
+class _Layout:
+    """Enough of a UILayout to record what a draw function puts in it."""
+
+    def __init__(self, log):
+        self.log = log
+
+    def label(self, text="", icon='NONE'):
+        self.log.append(("label", text, icon))
+
+    def column(self, align=False):
+        return self
+
+    def row(self, align=False):
+        return self
+
+    def operator(self, idname, text="", icon='NONE', depress=False):
+        self.log.append(("operator", idname, text, icon, depress))
+        return type("Props", (), {})()
+
+
+def test_one_view_flips_in_depth_from_the_panel(blender):
+    """Initialize from one view: the panel offers each limb of the anchor frames to flip in
+    depth; a flip is remembered for Initialize and Track, runs the fit again, and a second
+    click undoes it."""
+    from zoopraxis.addon import pipeline
+    from zoopraxis.addon.panels import _draw_init_notes
+
+    settings = load_sample(("cam0",))
+    bpy.ops.zoopraxis.import_markers(filepath=str(SAMPLE / "markers.json"))
+    assert bpy.ops.zoopraxis.initialize() == {'FINISHED'}
+    assert settings.one_view_frames == "0,47" and settings.depth_flips == ""
+    take = pipeline.gather(blender)
+    before = pipeline.initial_for(blender.scene, take)
+    take.close()
+    assert before.flipped == {}
+    assert bpy.ops.zoopraxis.flip_depth(frame=0, part="left leg") == {'FINISHED'}
+    assert settings.depth_flips == "0:left leg"
+    take = pipeline.gather(blender)
+    assert take.flips == {0: ["left leg"]}
+    after = pipeline.initial_for(blender.scene, take)
+    take.close()
+    assert after is not None and after is not before
+    if after.flipped:
+        assert after.flipped == {0: ["left leg"]}
+        moved = np.linalg.norm(after.joints3d(0) - before.joints3d(0), axis=1).max()
+        assert moved > 0.1
+    else:
+        assert any("left leg" in line for line in settings.init_notes.split("\n"))
+    log = []
+    _draw_init_notes(_Layout(log), settings)
+    buttons = [entry for entry in log if entry[0] == "operator"]
+    assert len(buttons) == 10                        # 5 parts for each of the 2 frames
+    assert ("operator", "zoopraxis.flip_depth", "L Leg", 'ERROR' if "0:left leg" in
+            settings.ambiguous_parts else 'NONE', True) in buttons
+    assert bpy.ops.zoopraxis.flip_depth(frame=0, part="left leg") == {'FINISHED'}
+    assert settings.depth_flips == ""
+    take = pipeline.gather(blender)
+    again = pipeline.initial_for(blender.scene, take)
+    take.close()
+    assert again.flipped == {}
+    assert np.allclose(again.joints3d(0), before.joints3d(0), atol=1e-6)
+    with pytest.raises(RuntimeError, match="unknown body part 'tail'"):
+        bpy.ops.zoopraxis.flip_depth(frame=0, part="tail")
+    assert settings.depth_flips == ""

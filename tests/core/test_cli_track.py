@@ -58,11 +58,27 @@ def test_track_writes_a_result(take, tmp_path):
     (["--frames", "0:50"], "inside the plate"),
     (["--offset", "cam7=2"], "view 'cam7'"),
     (["--workers", "-1"], "--workers -1"),
+    (["--flip", "0:tail"], "--flip '0:tail': expected FRAME:PART"),
+    (["--flip", "3:left-leg"], "frame 3 is not an anchor frame"),
 ])
 def test_track_bad_input_is_one_line(take, tmp_path, change, message):
     run = zoopraxis(*track_args(take, tmp_path / "r.json", *change))
     assert run.returncode == 2
     assert message in run.stderr and len(run.stderr.strip().splitlines()) == 1
+
+
+def test_track_one_view_with_a_limb_flipped_in_depth(take, tmp_path):
+    out = tmp_path / "result.json"
+    marks = json.loads((take / "markers.json").read_text())
+    for anchor in marks["anchors"]:
+        anchor["views"] = {"cam0": anchor["views"]["cam0"]}
+    (tmp_path / "markers.json").write_text(json.dumps(marks))
+    run = zoopraxis("track", "--plate", f"cam0={take / 'cam0'}", "--markers",
+                    tmp_path / "markers.json", "--out", out, "--flip", "0:left-leg")
+    assert run.returncode == 0, run.stderr
+    assert "frame 0: flipped in depth: left leg" in run.stdout or \
+        "the left leg lies across the view" in run.stdout
+    assert result_io.read_result(out).mode == "uncalibrated"
 
 
 def test_calibration_missing_a_view(take, tmp_path):

@@ -280,6 +280,67 @@ def test_arm_pointing_along_the_view_is_reported_ambiguous(rng):
                and "mirrored in depth fits about as well" in w for w in result.warnings)
 
 
+def _arm_forward_from_the_front(rng):
+    """A straight left arm raised 45 degrees forwards, seen from the front at 10 m."""
+    body = bm.make_body("full")
+    angles = body.rest_pose().angles
+    angles[body.dof_index("l_shoulder_flex")] = np.radians(-45.0)
+    X = body.joints(bm.Pose(se3.transform(p=[0.0, 0.0, 1.0]), angles))
+    from zoopraxis.core.camera import look_at
+    R, _ = look_at([0.0, -10.0, 1.0], [0.0, 0.0, 1.0])
+    cam = ScaledOrthoCamera("cam0", (1920, 1080), 430.0, R=R, t=[0.0, 0.0, 10.0])
+    return X, cam, [Anchor(0, clicks([cam], X, rng, noise=0.5))]
+
+
+def test_animator_flips_an_ambiguous_limb_to_its_other_depth(rng):
+    """The fit names the left arm as ambiguous; flipping it gives the other pose that fits the
+    clicks: the wrist on the other side of the shoulder in depth, one of the two poses the
+    true one. Flipping what lies across the view changes nothing and says so."""
+    X, cam, anchors = _arm_forward_from_the_front(rng)
+    flat = init.PosePrior(np.zeros((1, 29)), bm.make_body("full").dof_names)
+    flat.bandwidth[:] = 100.0             # every pose equally likely: the clicks decide alone
+    first = init.initialize(anchors, {"cam0": cam}, calibrated=False, pose_prior=flat)
+    assert "left arm" in first.ambiguous_parts[0]
+    assert first.flipped == {}
+    flipped = init.initialize(anchors, {"cam0": cam}, calibrated=False, pose_prior=flat,
+                              flips={0: ["the Left-Arm"]})
+    assert flipped.flipped == {0: ["left arm"]}
+    assert flipped.rms["cam0"] < 1.5 and first.rms["cam0"] < 1.5
+    a, b = first.joints3d(0), flipped.joints3d(0)
+    wrist, shoulder = JOINT_INDEX["l_wrist"], JOINT_INDEX["l_shoulder"]
+    depth = cam.R[2]
+    # the wrist's depth relative to the shoulder changes sign, about 0.4 m each way
+    da, db = (a[wrist] - a[shoulder]) @ depth, (b[wrist] - b[shoulder]) @ depth
+    assert da * db < 0 and min(abs(da), abs(db)) > 0.25
+    truth = X - X[0]
+    errors = sorted(init.procrustes_mpjpe(p, truth) for p in (a, b))
+    assert errors[0] < 0.03 < errors[1]
+    # a straight leg hanging in the image plane is its own mirror: nothing to flip
+    same = init.initialize(anchors, {"cam0": cam}, calibrated=False, pose_prior=flat,
+                           flips={0: ["right leg"]})
+    assert same.flipped == {}
+    assert any("the right leg lies across the view" in w for w in same.warnings)
+    assert np.allclose(same.joints3d(0), a, atol=1e-6)
+
+
+def test_flips_are_checked_and_ignored_where_the_depth_is_seen(rng):
+    X, cam, anchors = _arm_forward_from_the_front(rng)
+    with pytest.raises(ZoopraxisError, match="unknown body part 'left hand'"):
+        init.initialize(anchors, {"cam0": cam}, calibrated=False, flips={0: ["left hand"]})
+    with pytest.raises(ZoopraxisError, match="frame 5 is not an anchor frame"):
+        init.initialize(anchors, {"cam0": cam}, calibrated=False, flips={5: ["left arm"]})
+    assert init.parse_flip("12:right-leg") == (12, "right leg")
+    for bad in ("left-leg", "x:left-leg", "3:tail", "3:"):
+        with pytest.raises(ZoopraxisError, match="expected FRAME:PART"):
+            init.parse_flip(bad)
+    cams = ring(3, rng)
+    result = init.initialize([Anchor(0, clicks(cams, X, rng))], {c.name: c for c in cams},
+                             flips={0: ["left arm"]})
+    assert result.flipped == {}
+    assert any("clicked in more than one view" in w and "left arm is ignored" in w
+               for w in result.warnings)
+
+
 # -- the learned pose prior ------------------------------------------------------------------
 
 def test_mirror_angles_swaps_sides_and_is_its_own_inverse(rng):
@@ -582,3 +643,35 @@ def test_init_command_one_view_with_and_without_the_pose_prior(tmp_path, capsys)
         assert data["mode"] == "uncalibrated"
         joints[len(flag)] = np.array(data["anchors"][0]["joints3d"])
     assert joints[0].shape == joints[1].shape == (17, 3)
+
+
+def test_init_command_flips_a_limb_and_says_how(tmp_path, capsys):
+    root = cli.__file__.replace("cli.py", "samples/walk3/")
+    marks = json.loads(open(root + "markers.json").read())
+    marks["anchors"] = [{"frame": a["frame"], "views": {"cam0": a["views"]["cam0"]}}
+                        for a in marks["anchors"][:1]]
+    markers = tmp_path / "markers.json"
+    markers.write_text(json.dumps(marks))
+    frame = marks["anchors"][0]["frame"]
+    base = ["init", "--markers", str(markers), f"--plate=cam0={root}cam0"]
+    assert cli.main(base + ["--out", str(tmp_path / "a.json")]) == 0
+    plain = json.loads((tmp_path / "a.json").read_text())
+    assert plain["flipped"] == {}
+    for frame_s, parts in plain["ambiguous_parts"].items():
+        assert all(p in init.FLIP_PARTS for p in parts)
+        assert f"--flip {frame_s}:" in capsys.readouterr().out
+    assert cli.main(base + ["--out", str(tmp_path / "b.json"), "--flip",
+                            f"{frame}:left-leg", "--flip", f"{frame}:right-arm"]) == 0
+    printed = capsys.readouterr().out
+    data = json.loads((tmp_path / "b.json").read_text())
+    made = data["flipped"].get(str(frame), [])
+    assert f"frame {frame}: flipped in depth: {', '.join(made)}" in printed if made else True
+    for part in ("left leg", "right arm"):
+        assert part in made or any(part in w for w in data["warnings"])
+    moved = np.linalg.norm(np.array(data["anchors"][0]["joints3d"])
+                           - np.array(plain["anchors"][0]["joints3d"]), axis=1)
+    assert (moved.max() > 0.1) == bool(made)
+    assert init.init_from_json(data).flipped == {frame: made} if made else True
+    assert cli.main(base + ["--out", str(tmp_path / "c.json"), "--flip", "tail"]) == 2
+    err = capsys.readouterr().err
+    assert "--flip 'tail': expected FRAME:PART" in err and len(err.strip().splitlines()) == 1
