@@ -292,13 +292,21 @@ def _arm_forward_from_the_front(rng):
     return X, cam, [Anchor(0, clicks([cam], X, rng, noise=0.5))]
 
 
+def _flat_prior():
+    """A pose prior that knows nothing: every pose equally likely (the broad everyday
+    Gaussian mixed in by the fit remains)."""
+    body = bm.make_body("full")
+    flat = init.PosePrior(np.zeros((1, body.n_dofs)), body.dof_names)
+    flat.bandwidth[:] = 100.0
+    return flat
+
+
 def test_animator_flips_an_ambiguous_limb_to_its_other_depth(rng):
     """The fit names the left arm as ambiguous; flipping it gives the other pose that fits the
     clicks: the wrist on the other side of the shoulder in depth, one of the two poses the
     true one. Flipping what lies across the view changes nothing and says so."""
     X, cam, anchors = _arm_forward_from_the_front(rng)
-    flat = init.PosePrior(np.zeros((1, 29)), bm.make_body("full").dof_names)
-    flat.bandwidth[:] = 100.0             # every pose equally likely: the clicks decide alone
+    flat = _flat_prior()
     first = init.initialize(anchors, {"cam0": cam}, calibrated=False, pose_prior=flat)
     assert "left arm" in first.ambiguous_parts[0]
     assert first.flipped == {}
@@ -443,17 +451,9 @@ def test_one_view_fit_of_held_out_capture_poses(shared_data):
 def test_one_view_choice_names_the_limb_when_the_prior_cannot_decide(rng):
     """A prior that knows nothing (the broad everyday Gaussian only) leaves the mirror
     ambiguity of a straight arm in the side of the image plane to the report."""
-    body = bm.make_body("full")
-    angles = body.rest_pose().angles
-    angles[body.dof_index("l_shoulder_flex")] = np.radians(-45.0)
-    X = body.joints(bm.Pose(se3.transform(p=[0.0, 0.0, 1.0]), angles))
-    from zoopraxis.core.camera import look_at
-    R, _ = look_at([0.0, -10.0, 1.0], [0.0, 0.0, 1.0])
-    cam = ScaledOrthoCamera("cam0", (1920, 1080), 430.0, R=R, t=[0.0, 0.0, 10.0])
-    flat = init.PosePrior(np.zeros((1, body.n_dofs)), body.dof_names)
-    flat.bandwidth[:] = 100.0             # every pose equally likely
-    result = init.initialize([Anchor(0, clicks([cam], X, rng, noise=0.5))], {"cam0": cam},
-                             calibrated=False, pose_prior=flat)
+    X, cam, anchors = _arm_forward_from_the_front(rng)
+    flat = _flat_prior()
+    result = init.initialize(anchors, {"cam0": cam}, calibrated=False, pose_prior=flat)
     assert result.ambiguous
     assert any("the left arm" in w and "clicks and pose prior" in w for w in result.warnings)
     with pytest.raises(ZoopraxisError, match="learned on the 'full' body"):
@@ -626,13 +626,20 @@ def test_init_command_writes_init_json(tmp_path, capsys):
     assert "file exists" in capsys.readouterr().err
 
 
-def test_init_command_one_view_with_and_without_the_pose_prior(tmp_path, capsys):
+def _sample_first_anchor_in_cam0(tmp_path):
+    """The sample's plates folder, a markers.json with its first anchor in cam0 alone, and
+    that anchor's frame."""
     root = cli.__file__.replace("cli.py", "samples/walk3/")
     marks = json.loads(open(root + "markers.json").read())
     marks["anchors"] = [{"frame": a["frame"], "views": {"cam0": a["views"]["cam0"]}}
                         for a in marks["anchors"][:1]]
     markers = tmp_path / "markers.json"
     markers.write_text(json.dumps(marks))
+    return root, markers, marks["anchors"][0]["frame"]
+
+
+def test_init_command_one_view_with_and_without_the_pose_prior(tmp_path, capsys):
+    root, markers, _ = _sample_first_anchor_in_cam0(tmp_path)
     joints = {}
     for flag in ([], ["--no-pose-prior"]):
         out = tmp_path / f"init{len(flag)}.json"
@@ -646,13 +653,7 @@ def test_init_command_one_view_with_and_without_the_pose_prior(tmp_path, capsys)
 
 
 def test_init_command_flips_a_limb_and_says_how(tmp_path, capsys):
-    root = cli.__file__.replace("cli.py", "samples/walk3/")
-    marks = json.loads(open(root + "markers.json").read())
-    marks["anchors"] = [{"frame": a["frame"], "views": {"cam0": a["views"]["cam0"]}}
-                        for a in marks["anchors"][:1]]
-    markers = tmp_path / "markers.json"
-    markers.write_text(json.dumps(marks))
-    frame = marks["anchors"][0]["frame"]
+    root, markers, frame = _sample_first_anchor_in_cam0(tmp_path)
     base = ["init", "--markers", str(markers), f"--plate=cam0={root}cam0"]
     assert cli.main(base + ["--out", str(tmp_path / "a.json")]) == 0
     plain = json.loads((tmp_path / "a.json").read_text())
