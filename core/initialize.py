@@ -30,7 +30,10 @@ The same prior, as a Gaussian mixture per limb (:meth:`PosePrior.mixture`), repl
 everyday-angle prior in the least-squares fit of such a frame, so that it also sets the depth
 of limbs nearly in the image plane, which the clicks leave almost free.
 Clicks that look swapped left for right and outlying clicks are named in warnings and not
-absorbed; a mirrored pose that fits (and is as likely) about as well is reported.
+absorbed; a mirrored pose that fits (and is as likely) about as well is reported, with the
+parts it moves (``InitResult.ambiguous_parts``). The animator, who sees the footage, may then
+name limbs to turn to their other depth (``flips``; ``--flip`` on the command line, toggles in
+the add-on's panel): each is fitted again from its reflected configurations.
 
 :func:`refine_dims` is the joint-based form of model fine-tuning (§2.7): the same joint
 problem over many frames with 2D joint observations; it is solved by blocks (Schur complement
