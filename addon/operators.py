@@ -316,7 +316,14 @@ class ZOOPRAXIS_OT_flip_depth(bpy.types.Operator):
         settings.depth_flips = pipeline.format_flips({f: p for f, p in flips.items() if p})
         how = 'INVOKE_DEFAULT' if context.window is not None and not bpy.app.background \
             else 'EXEC_DEFAULT'
-        return bpy.ops.zoopraxis.initialize(how)
+        # In the UI the initialization runs on as a modal job of its own; this operator is
+        # done once it started (or ran) it.
+        try:
+            started = bpy.ops.zoopraxis.initialize(how)
+        except RuntimeError as ex:          # the initialization's own one-line error
+            self.report({'ERROR'}, str(ex).removeprefix("Error: ").strip())
+            return {'CANCELLED'}
+        return {'FINISHED'} if started & {'FINISHED', 'RUNNING_MODAL'} else {'CANCELLED'}
 
 
 class ZOOPRAXIS_OT_track(JobOperator, bpy.types.Operator):

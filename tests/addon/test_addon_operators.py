@@ -484,3 +484,12 @@ def test_one_view_flips_in_depth_from_the_panel(blender):
     with pytest.raises(RuntimeError, match="unknown body part 'tail'"):
         bpy.ops.zoopraxis.flip_depth(frame=0, part="tail")
     assert settings.depth_flips == ""
+
+
+def test_flip_reports_the_initialization_error(blender):
+    """A flip whose initialization cannot run (no markers) says why in one line; the toggle
+    is kept for when it can."""
+    settings = load_sample(("cam0",))
+    with pytest.raises(RuntimeError, match="joint markers: no anchors"):
+        bpy.ops.zoopraxis.flip_depth(frame=0, part="right arm")
+    assert settings.depth_flips == "0:right arm"
