@@ -457,16 +457,19 @@ class DifferentialTracker:
         seen[key] = (term, renders[c], cam, pose, visible.copy())
         return visible
 
-    def _system(self, state, level, terms_by_view, images, em_weights):
+    def _system(self, state, level, terms_by_view, images, em_weights, lazy=False):
         """Total normal equations over views and terms at ``state``.
 
         Terms of one view are summed per segment first and mapped to the pose parameters
-        once (:func:`image_motion.assemble`).
+        once (:func:`image_motion.assemble`). With ``lazy``, returns ``(normal_equations,
+        cost, accs)`` where ``normal_equations()`` gives ``(H, g)``: a step that raises the
+        cost is rejected on the cost alone (calibrated views then skip the Jacobians). Call
+        it before the next system is made.
         """
         roots_cols, scale_cols, angle_cols, P = self.layout(len(state.cameras))
         kin = self.body.kinematics(state.pose(0)) if self.calibrated else None
         if self.calibrated:
-            H, g, cost, accs = self._stacked_system(state, level, terms_by_view, images,
+            data, cost, accs = self._stacked_system(state, level, terms_by_view, images,
                                                     em_weights, kin)
         else:
             H, g, cost, accs = np.zeros((P, P)), np.zeros(P), 0.0, {}
@@ -478,16 +481,31 @@ class DifferentialTracker:
                 if Hc is not None:
                     H += Hc
                     g += gc
+
+            def data():
+                return H, g
+        penalty = None
         if self.settings.collision_weight > 0 and len(self.proxies.pairs):
             # Limbs must not pass through each other (penalty on sphere-proxy overlaps).
             seg2world, seg_jac = kin if self.calibrated else self.body.kinematics(state.pose(0))
             r, J = penalty_system(self.proxies, seg2world, seg_jac)
             if len(r):
+                penalty = (r, J)
+                cost += self.settings.collision_weight * float(r @ r)
+
+        def normal_equations():
+            H, g = data()
+            if penalty is not None:
+                r, J = penalty
                 w = self.settings.collision_weight
                 cols = np.concatenate([roots_cols[0], angle_cols])
                 H[np.ix_(cols, cols)] += w * J.T @ J
                 g[cols] += w * J.T @ r
-                cost += w * float(r @ r)
+            return H, g
+
+        if lazy:
+            return normal_equations, cost, accs
+        H, g = normal_equations()
         return H, g, cost, accs
 
     def _stacked_system(self, state, level, terms_by_view, images, em_weights, kin):
@@ -508,17 +526,21 @@ class DifferentialTracker:
             self._stack_cache = cached
         _, _, keys, stack, weights = cached
         if not keys:
-            return np.zeros((P, P)), np.zeros(P), 0.0, {}
+            return (lambda: (np.zeros((P, P)), np.zeros(P))), 0.0, {}
         seg2world, seg_jac = kin
         imgs = [images[c].stacks[level] if key != "silhouette" else images[c].sdf[level]
                 for c, key in keys]
         cams = [self._camera_at(state.cameras[c], level) for c, _ in keys]
         total, per_part = accumulate_stacked(stack, imgs, cams, weights, seg2world,
                                              self.body.n_segments,
-                                             extra_weights=[em_weights.get(k) for k in keys])
-        H, g = assemble(total, seg_jac, root_cols=roots_cols[0], angle_cols=angle_cols,
-                        n_params=P)
-        return H, g, total.cost, dict(zip(keys, per_part))
+                                             extra_weights=[em_weights.get(k) for k in keys],
+                                             lazy=True)
+
+        def normal_equations():
+            return assemble(total(), seg_jac, root_cols=roots_cols[0], angle_cols=angle_cols,
+                            n_params=P)
+
+        return normal_equations, total.cost, dict(zip(keys, per_part))
 
     def _view_system(self, state, level, terms_by_view, images, em_weights, c):
         """One uncalibrated view's normal equations (its own root and scale)."""
@@ -666,9 +688,11 @@ class DifferentialTracker:
                 except np.linalg.LinAlgError:
                     delta = np.linalg.lstsq(A, rhs, rcond=None)[0]
                 candidate = self.retract(state, delta)
-                H2, g2, cost2, accs2 = self._system(candidate, level, terms_by_view, images_t1, em)
+                system2, cost2, accs2 = self._system(candidate, level, terms_by_view, images_t1,
+                                                     em, lazy=True)
                 total_iters += 1
                 if cost2 <= cost * (1 + 1e-9):
+                    H2, g2 = system2()
                     state, H, g, cost, accs = candidate, H2, g2, cost2, accs2
                     lam = max(lam / 3, 1e-6)
                     if s.em and it == 0:

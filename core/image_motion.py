@@ -404,7 +404,7 @@ def _camera_runs(bounds, cameras):
 
 
 def accumulate_stacked(stack_terms, images, cameras, weights, seg2world, n_segments, *,
-                       with_scale=False, robust=True, extra_weights=None):
+                       with_scale=False, robust=True, extra_weights=None, lazy=False):
     """:func:`accumulate` over several terms at once, summed per segment into one system.
 
     Valid when every term moves with the same ``seg2world`` (calibrated views share the world
@@ -428,11 +428,16 @@ def accumulate_stacked(stack_terms, images, cameras, weights, seg2world, n_segme
         Geman-McClure weights and costs (False: plain least squares).
     extra_weights : list of array or None, optional
         Per part, EM ownership weights.
+    lazy : bool
+        Return the cost at once and the normal equations on demand: a Levenberg-Marquardt
+        step that raises the cost needs only the cost. Ask for them before the next call (the
+        two share work arrays).
 
     Returns
     -------
     total : Accumulated
-        Summed A (S, 7, 7), b and cost; ``residual``/``inside`` are None.
+        Summed A (S, 7, 7), b and cost; ``residual``/``inside`` are None. With ``lazy``, a
+        function that returns it instead.
     parts : list of Accumulated
         Per part: cost, count, residual and inside (``A``/``b`` None).
     """
@@ -489,42 +494,49 @@ def accumulate_stacked(stack_terms, images, cameras, weights, seg2world, n_segme
     else:
         rho = r2
     brho = np.multiply(base, rho, out=work.get("brho", n))
-    # The rows g_i = [world gradient, X x world gradient] go straight into segment order:
-    # only the world gradients are gathered, the points are already sorted (Xs).
-    gp = work.get("gp", n, 3)
-    for lo, hi, pull in pulls:
-        pull(grad[lo:hi], out=gp[lo:hi])
-    order = st.order
-    gp = np.take(gp, order, axis=0, out=work.get("gp_sorted", n, 3), mode="clip")
-    m = 7 if with_scale else 6
-    G = work.get("G", n, m)
-    G[:, :3] = gp
-    t1, t2 = work.get("t1", n), work.get("t2", n)
-    for col, (i, j) in ((3, (1, 2)), (4, (2, 0)), (5, (0, 1))):
-        # (X x gradient)_col = X_i g_j - X_j g_i
-        np.multiply(Xs[:, i], gp[:, j], out=t1)
-        np.multiply(Xs[:, j], gp[:, i], out=t2)
-        np.subtract(t1, t2, out=G[:, col])
-    if with_scale:
-        G[:, 6] = np.take(grad[:, 0] * centred[:, 0] + grad[:, 1] * centred[:, 1], order)
     out = []
     for i in range(len(st.parts)):
         lo, hi = bounds[i], bounds[i + 1]
         out.append(Accumulated(None, None, float(brho[lo:hi].sum()), float(w[lo:hi].sum()),
                                r[lo:hi], inside[lo:hi]))
-    W = np.multiply(part_w, w, out=t1)
-    R = np.take(r, order, out=work.get("R", n), mode="clip")
-    W = np.take(W, order, out=t2, mode="clip")
-    A = np.zeros((n_segments, 7, 7))
-    b = np.zeros((n_segments, 7))
-    GW = work.get("GW", n, m)
-    for j in range(m):
-        np.multiply(G[:, j], W, out=GW[:, j])
-    for k, lo, hi in st.groups:
-        A[k, :m, :m] = GW[lo:hi].T @ G[lo:hi]
-        b[k, :m] = GW[lo:hi].T @ R[lo:hi]
     cost = float(part_w @ brho)
-    return Accumulated(A, b, cost, float(W.sum()), None, None), out
+
+    def normal_equations():
+        # The rows g_i = [world gradient, X x world gradient] go straight into segment order:
+        # only the world gradients are gathered, the points are already sorted (Xs).
+        gp = work.get("gp", n, 3)
+        for lo, hi, pull in pulls:
+            pull(grad[lo:hi], out=gp[lo:hi])
+        order = st.order
+        gp = np.take(gp, order, axis=0, out=work.get("gp_sorted", n, 3), mode="clip")
+        m = 7 if with_scale else 6
+        G = work.get("G", n, m)
+        G[:, :3] = gp
+        t1, t2 = work.get("t1", n), work.get("t2", n)
+        for col, (i, j) in ((3, (1, 2)), (4, (2, 0)), (5, (0, 1))):
+            # (X x gradient)_col = X_i g_j - X_j g_i
+            np.multiply(Xs[:, i], gp[:, j], out=t1)
+            np.multiply(Xs[:, j], gp[:, i], out=t2)
+            np.subtract(t1, t2, out=G[:, col])
+        if with_scale:
+            G[:, 6] = np.take(grad[:, 0] * centred[:, 0] + grad[:, 1] * centred[:, 1], order)
+        W = np.multiply(part_w, w, out=t1)
+        R = np.take(r, order, out=work.get("R", n), mode="clip")
+        W = np.take(W, order, out=t2, mode="clip")
+        A = np.zeros((n_segments, 7, 7))
+        b = np.zeros((n_segments, 7))
+        GW = work.get("GW", n, m)
+        for j in range(m):
+            np.multiply(G[:, j], W, out=GW[:, j])
+        for k, lo, hi in st.groups:
+            A[k, :m, :m] = GW[lo:hi].T @ G[lo:hi]
+            b[k, :m] = GW[lo:hi].T @ R[lo:hi]
+        return Accumulated(A, b, cost, float(W.sum()), None, None)
+
+    if lazy:
+        normal_equations.cost = cost
+        return normal_equations, out
+    return normal_equations(), out
 
 
 def assemble(acc, seg_jac, *, root_cols, angle_cols, n_params, scale_col=None):

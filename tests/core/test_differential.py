@@ -107,7 +107,8 @@ def test_stacked_calibrated_system_equals_the_sum_over_views(body):
     moved = tracker.retract(state, np.r_[rng.normal(0, 0.01, 6),
                                          rng.normal(0, 0.05, body.n_dofs)])
     kin = body.kinematics(moved.pose(0))
-    H, g, cost, accs = tracker._stacked_system(moved, 0, terms, ims1, em, kin)
+    normal_equations, cost, accs = tracker._stacked_system(moved, 0, terms, ims1, em, kin)
+    H, g = normal_equations()
     H_sum, g_sum, cost_sum = 0, 0, 0.0
     for c in range(3):
         Hc, gc, cc, accs_c = tracker._view_system(moved, 0, terms, ims1, em, c)
@@ -338,3 +339,25 @@ def test_difference_and_parameter_groups_equal_the_plain_computation(body, calib
         groups = tracker._param_groups(V)
         assert len(groups) == len(fresh)
         assert all(np.array_equal(g, f) for g, f in zip(groups, fresh))
+
+
+def test_lazy_system_equals_the_eager_one(body):
+    """A Levenberg-Marquardt candidate is judged on its cost alone; its normal equations,
+    asked for afterwards, are the ones an eager system gives (to the bit)."""
+    p0 = body.rest_pose(se3.transform(p=[0.0, 0.0, 0.95]))
+    cams = ring_of_cameras(2, 3.5, 1.3, [0, 0, 0.9], SIZE, 350)
+    frames = model_plates(body, [p0, p0], cams, noise=1.0)
+    settings = D.Settings()
+    tracker = D.DifferentialTracker(body, True, settings)
+    state = D.State(np.stack([p0.root] * 2), p0.angles.copy(), cams)
+    ims0, ims1 = prepared(frames[0], settings, True), prepared(frames[1], settings, True)
+    flow = tracker.template_terms(state, ims0, tracker.render_views(state))
+    terms = [[("flow", flow[0][c], 1.0)] for c in range(2)]
+    moved = tracker.retract(state, np.r_[np.zeros(6), np.full(body.n_dofs, 0.05)])
+    H, g, cost, accs = tracker._system(moved, 0, terms, ims1, {})
+    normal_equations, lazy_cost, lazy_accs = tracker._system(moved, 0, terms, ims1, {},
+                                                             lazy=True)
+    assert lazy_cost == cost and lazy_accs.keys() == accs.keys()
+    H2, g2 = normal_equations()
+    assert np.abs(H).max() > 0
+    assert np.array_equal(H, H2) and np.array_equal(g, g2)
