@@ -88,16 +88,22 @@ def test_views_in_parallel_give_the_same_step(body):
     assert np.array_equal(ra.residual, rb.residual) and ra.cost == rb.cost
 
 
+def _calibrated_frames(body, poses, views):
+    """A tracker over ``views`` calibrated cameras, its state at the first pose, and the
+    prepared images of the model plates of the two poses."""
+    cams = ring_of_cameras(views, 3.5, 1.3, [0, 0, 0.9], SIZE, 350)
+    frames = model_plates(body, list(poses), cams, noise=1.0)
+    settings = D.Settings()
+    tracker = D.DifferentialTracker(body, True, settings)
+    state = D.State(np.stack([poses[0].root] * views), poses[0].angles.copy(), cams)
+    return (tracker, state, prepared(frames[0], settings, True),
+            prepared(frames[1], settings, True))
+
+
 def test_stacked_calibrated_system_equals_the_sum_over_views(body):
     """Calibrated views share the world pose: the one-pass stacked system (all views' points
     summed per segment) is the per-view systems added up."""
-    p0, p1 = two_poses(body)
-    cams = ring_of_cameras(3, 3.5, 1.3, [0, 0, 0.9], SIZE, 350)
-    frames = model_plates(body, [p0, p1], cams, noise=1.0)
-    settings = D.Settings()
-    tracker = D.DifferentialTracker(body, True, settings)
-    state = D.State(np.stack([p0.root] * 3), p0.angles.copy(), cams)
-    ims0, ims1 = prepared(frames[0], settings, True), prepared(frames[1], settings, True)
+    tracker, state, ims0, ims1 = _calibrated_frames(body, two_poses(body), 3)
     renders = tracker.render_views(state)
     flow = tracker.template_terms(state, ims0, renders)
     sil = tracker.contour_terms(state, 0)
@@ -344,13 +350,7 @@ def test_difference_and_parameter_groups_equal_the_plain_computation(body, calib
 def test_lazy_system_equals_the_eager_one(body):
     """A Levenberg-Marquardt candidate is judged on its cost alone; its normal equations,
     asked for afterwards, are the ones an eager system gives (to the bit)."""
-    p0 = body.rest_pose(se3.transform(p=[0.0, 0.0, 0.95]))
-    cams = ring_of_cameras(2, 3.5, 1.3, [0, 0, 0.9], SIZE, 350)
-    frames = model_plates(body, [p0, p0], cams, noise=1.0)
-    settings = D.Settings()
-    tracker = D.DifferentialTracker(body, True, settings)
-    state = D.State(np.stack([p0.root] * 2), p0.angles.copy(), cams)
-    ims0, ims1 = prepared(frames[0], settings, True), prepared(frames[1], settings, True)
+    tracker, state, ims0, ims1 = _calibrated_frames(body, two_poses(body), 2)
     flow = tracker.template_terms(state, ims0, tracker.render_views(state))
     terms = [[("flow", flow[0][c], 1.0)] for c in range(2)]
     moved = tracker.retract(state, np.r_[np.zeros(6), np.full(body.n_dofs, 0.05)])
