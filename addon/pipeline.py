@@ -70,6 +70,11 @@ class Take:
         for plate in self.plates.values():
             plate.close()
 
+    def flips_at(self, anchors):
+        """The depth flips of these anchors' frames, or None."""
+        frames = {a.frame for a in anchors}
+        return {f: p for f, p in (self.flips or {}).items() if f in frames} or None
+
 
 def gather(context, *, need_markers=True):
     """Read the take off the scene and check it, before any job starts.
@@ -149,8 +154,7 @@ def initialize(take, *, progress=None, cancel=None):
         {v: p.image_size for v, p in take.plates.items()}
     result = call(module.initialize, inside, cameras, template=take.template,
                   calibrated=take.cameras is not None, views=list(take.plates),
-                  flips={f: p for f, p in (take.flips or {}).items()
-                         if f in {a.frame for a in inside}} or None)
+                  flips=take.flips_at(inside))
     if progress:
         progress(1, 1)
     return result
@@ -189,8 +193,7 @@ def track(take, *, init=None, progress=None, cancel=None, log=None):
     """Track the take (:func:`core.track.track`, or the particle/hybrid trackers)."""
     options = dict(frames=take.frames, offsets=take.offsets, template=take.template, init=init,
                    progress=progress, cancel=cancel, log=log)
-    inside = {a.frame for a in take.anchors if a.frame in take.frames}
-    flips = {f: p for f, p in (take.flips or {}).items() if f in inside}
+    flips = take.flips_at([a for a in take.anchors if a.frame in take.frames])
     if flips and init is None:
         options["flips"] = flips
     if take.tracker == "differential":

@@ -76,8 +76,8 @@ def main(argv):
                                            for view, rms in result.rms.items()))
     for warning in result.warnings:
         print(f"warning: {warning}")
-    for frame, parts in sorted(result.flipped.items()):
-        print(f"frame {frame}: flipped in depth: {', '.join(parts)}")
+    for note in result.flip_notes():
+        print(note)
     if result.ambiguous:
         print("warning: the 3D pose is ambiguous (see above)")
     for frame, parts in sorted(result.ambiguous_parts.items()):

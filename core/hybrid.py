@@ -323,8 +323,8 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
 
         res = initialize(inside, {v: cameras[v] for v in views}, template=template,
                          calibrated=True, views=views, flips=flips)
-        for frame, parts in sorted(res.flipped.items()):
-            log(f"frame {frame}: flipped in depth: {', '.join(parts)}")
+        for note in res.flip_notes():
+            log(note)
         init = Initial(res.body, res.poses, res.cameras, None, list(getattr(res, "warnings", [])))
     for w in init.warnings:
         log(f"warning: {w}")

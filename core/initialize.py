@@ -1130,6 +1130,11 @@ class InitResult:
     ambiguous_parts: dict = field(default_factory=dict)
     flipped: dict = field(default_factory=dict)
 
+    def flip_notes(self):
+        """One line per anchor frame where parts were flipped in depth."""
+        return [f"frame {frame}: flipped in depth: {', '.join(parts)}"
+                for frame, parts in sorted(self.flipped.items())]
+
     @property
     def dims(self):
         """Fitted lengths, ``{name: metres}`` over ``LENGTH_DIMS``."""

@@ -672,8 +672,8 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
         res = initialize(inside, {v: cameras[v] if calibrated else tuple(plates[v].image_size)
                                   for v in views},
                          template=template, calibrated=calibrated, views=views, flips=flips)
-        for frame, parts in sorted(res.flipped.items()):
-            log(f"frame {frame}: flipped in depth: {', '.join(parts)}")
+        for note in res.flip_notes():
+            log(note)
         init = Initial(res.body, res.poses, res.cameras, getattr(res, "view_cameras", None),
                        list(getattr(res, "warnings", [])))
     for w in init.warnings:
