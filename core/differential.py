@@ -464,7 +464,8 @@ class DifferentialTracker:
         once (:func:`image_motion.assemble`). With ``lazy``, returns ``(normal_equations,
         cost, accs)`` where ``normal_equations()`` gives ``(H, g)``: a step that raises the
         cost is rejected on the cost alone (calibrated views then skip the Jacobians). Call
-        it before the next system is made.
+        it before the next system is made; ``normal_equations(em)`` makes them under other EM
+        weights (the costs do not depend on those).
         """
         roots_cols, scale_cols, angle_cols, P = self.layout(len(state.cameras))
         kin = self.body.kinematics(state.pose(0)) if self.calibrated else None
@@ -472,18 +473,23 @@ class DifferentialTracker:
             data, cost, accs = self._stacked_system(state, level, terms_by_view, images,
                                                     em_weights, kin)
         else:
-            H, g, cost, accs = np.zeros((P, P)), np.zeros(P), 0.0, {}
-            for Hc, gc, cost_c, accs_c in self.map_views(
-                    lambda c: self._view_system(state, level, terms_by_view, images,
-                                                em_weights, c), len(terms_by_view)):
-                cost += cost_c
-                accs.update(accs_c)
-                if Hc is not None:
-                    H += Hc
-                    g += gc
+            def views(em):
+                H, g, cost, accs = np.zeros((P, P)), np.zeros(P), 0.0, {}
+                for Hc, gc, cost_c, accs_c in self.map_views(
+                        lambda c: self._view_system(state, level, terms_by_view, images,
+                                                    em, c), len(terms_by_view)):
+                    cost += cost_c
+                    accs.update(accs_c)
+                    if Hc is not None:
+                        H += Hc
+                        g += gc
+                return H, g, cost, accs
 
-            def data():
-                return H, g
+            H, g, cost, accs = views(em_weights)
+
+            def data(em=None):
+                # other EM weights: the views' systems again (the costs stay the same)
+                return (H, g) if em is None else views(em)[:2]
         penalty = None
         if self.settings.collision_weight > 0 and len(self.proxies.pairs):
             # Limbs must not pass through each other (penalty on sphere-proxy overlaps).
@@ -493,8 +499,8 @@ class DifferentialTracker:
                 penalty = (r, J)
                 cost += self.settings.collision_weight * float(r @ r)
 
-        def normal_equations():
-            H, g = data()
+        def normal_equations(em_weights=None):
+            H, g = data(em_weights)
             if penalty is not None:
                 r, J = penalty
                 w = self.settings.collision_weight
@@ -526,7 +532,7 @@ class DifferentialTracker:
             self._stack_cache = cached
         _, _, keys, stack, weights = cached
         if not keys:
-            return (lambda: (np.zeros((P, P)), np.zeros(P))), 0.0, {}
+            return (lambda em=None: (np.zeros((P, P)), np.zeros(P))), 0.0, {}
         seg2world, seg_jac = kin
         imgs = [images[c].stacks[level] if key != "silhouette" else images[c].sdf[level]
                 for c, key in keys]
@@ -536,8 +542,9 @@ class DifferentialTracker:
                                              extra_weights=[em_weights.get(k) for k in keys],
                                              lazy=True)
 
-        def normal_equations():
-            return assemble(total(), seg_jac, root_cols=roots_cols[0], angle_cols=angle_cols,
+        def normal_equations(em=None):
+            acc = total() if em is None else total([em.get(k) for k in keys])
+            return assemble(acc, seg_jac, root_cols=roots_cols[0], angle_cols=angle_cols,
                             n_params=P)
 
         return normal_equations, total.cost, dict(zip(keys, per_part))
@@ -692,12 +699,15 @@ class DifferentialTracker:
                                                      em, lazy=True)
                 total_iters += 1
                 if cost2 <= cost * (1 + 1e-9):
-                    H2, g2 = system2()
+                    if s.em and it == 0:
+                        # the support maps' EM step at the accepted pose; the costs do not
+                        # change with the weights, the normal equations are made with them
+                        em = self._em_weights(terms_by_view, images_t1, accs2, level)
+                        H2, g2 = system2(em)
+                    else:
+                        H2, g2 = system2()
                     state, H, g, cost, accs = candidate, H2, g2, cost2, accs2
                     lam = max(lam / 3, 1e-6)
-                    if s.em and it == 0:
-                        em = self._em_weights(terms_by_view, images_t1, accs, level)
-                        H, g, cost, accs = self._system(state, level, terms_by_view, images_t1, em)
                     if np.abs(delta).max() < s.tolerance:
                         break
                 else:

@@ -387,6 +387,7 @@ class _Workspace(threading.local):
         return view if width == 1 and name not in _WIDE else view.reshape(n, width)
 
 
+_KEEP = object()        # accumulate_stacked's normal equations: keep the EM weights given
 _WIDE = frozenset(("X", "Xs", "vals", "grad", "gp", "gp_sorted", "G", "GW"))
 _WORKSPACE = _Workspace()
 
@@ -431,7 +432,9 @@ def accumulate_stacked(stack_terms, images, cameras, weights, seg2world, n_segme
     lazy : bool
         Return the cost at once and the normal equations on demand: a Levenberg-Marquardt
         step that raises the cost needs only the cost. Ask for them before the next call (the
-        two share work arrays).
+        two share work arrays). The function takes other ``extra_weights`` (same form): the
+        costs and residuals do not depend on them, so an EM step re-weighs the equations
+        without projecting and sampling again.
 
     Returns
     -------
@@ -481,18 +484,26 @@ def accumulate_stacked(stack_terms, images, cameras, weights, seg2world, n_segme
         grad[off] = 0.0
     part_w = st.part_weights(weights)
     base = np.multiply(st.weight, inside, out=work.get("base", n))
-    w = base
-    if extra_weights is not None and any(e is not None for e in extra_weights):
-        ew = work.get("extra", n)
-        for i, e in enumerate(extra_weights):
-            ew[bounds[i]:bounds[i + 1]] = 1.0 if e is None else e
-        w = np.multiply(base, ew, out=ew)
     r2 = np.multiply(r, r, out=work.get("r2", n))
     if robust:
         rho, gm = geman_mcclure(r2, st.scale2, work.get("rho", n), work.get("den", n))
-        w = np.multiply(w, gm, out=work.get("w", n))
     else:
-        rho = r2
+        rho, gm = r2, None
+
+    def weights_with(extra):
+        """The points' weights: term weight and inside, EM ownership, robust weight."""
+        w = base
+        if extra is not None and any(e is not None for e in extra):
+            ew = work.get("extra", n)
+            for i, e in enumerate(extra):
+                ew[bounds[i]:bounds[i + 1]] = 1.0 if e is None else e
+            w = np.multiply(base, ew, out=ew)
+        if gm is not None:
+            w = np.multiply(w, gm, out=work.get("w", n))
+        return w
+
+    w = weights_with(extra_weights)
+    # The costs do not depend on the EM weights (they weigh the normal equations only).
     brho = np.multiply(base, rho, out=work.get("brho", n))
     out = []
     for i in range(len(st.parts)):
@@ -501,7 +512,13 @@ def accumulate_stacked(stack_terms, images, cameras, weights, seg2world, n_segme
                                r[lo:hi], inside[lo:hi]))
     cost = float(part_w @ brho)
 
-    def normal_equations():
+    def normal_equations(extra_weights=_KEEP):
+        nonlocal w
+        if extra_weights is not _KEEP:
+            # the same residuals under other EM weights (the parts' counts follow)
+            w = weights_with(extra_weights)
+            for i, acc in enumerate(out):
+                acc.count = float(w[bounds[i]:bounds[i + 1]].sum())
         # The rows g_i = [world gradient, X x world gradient] go straight into segment order:
         # only the world gradients are gathered, the points are already sorted (Xs).
         gp = work.get("gp", n, 3)

@@ -361,3 +361,22 @@ def test_lazy_system_equals_the_eager_one(body):
     H2, g2 = normal_equations()
     assert np.abs(H).max() > 0
     assert np.array_equal(H, H2) and np.array_equal(g, g2)
+
+
+def test_em_reweighted_system_equals_a_fresh_one(body):
+    """The EM step's weights change the normal equations, not the costs: a lazy system asked
+    for its equations under new EM weights gives, to the bit, what a system made afresh with
+    them gives, and the same cost."""
+    tracker, state, ims0, ims1 = _calibrated_frames(body, two_poses(body), 2)
+    flow = tracker.template_terms(state, ims0, tracker.render_views(state))
+    terms = [[("flow", flow[0][c], 1.0)] for c in range(2)]
+    moved = tracker.retract(state, np.r_[np.zeros(6), np.full(body.n_dofs, 0.05)])
+    normal_equations, cost, accs = tracker._system(moved, 0, terms, ims1, {}, lazy=True)
+    em = tracker._em_weights(terms, ims1, accs, 0)
+    assert em and all(np.ptp(w) > 0.1 for w in em.values())    # the weights do change
+    H2, g2 = normal_equations(em)
+    H, g, cost_em, _ = tracker._system(moved, 0, terms, ims1, em)
+    assert cost_em == cost
+    assert np.array_equal(H, H2) and np.array_equal(g, g2)
+    H0, _, _, _ = tracker._system(moved, 0, terms, ims1, {})
+    assert not np.allclose(H0, H)
