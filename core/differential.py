@@ -23,6 +23,7 @@ own scaled-orthographic pose of the body and share the joint angles (B&M eq. 28)
 import os
 from collections import OrderedDict
 from dataclasses import dataclass, field
+from functools import partial
 
 import cv2
 import numpy as np
@@ -678,7 +679,13 @@ class DifferentialTracker:
             lam = s.damping
             H, g, cost, accs = self._system(state, level, terms_by_view, images_t1, em)
             iters = s.iterations[min(s.levels - 1 - level, len(s.iterations) - 1)]
+            # An accepted step's normal equations are made when the next step needs them
+            # (before any other system): none for the level's last step.
+            pending = None
             for it in range(iters):
+                if pending is not None:
+                    H, g = pending()
+                    pending = None
                 diag = np.diag(H).copy()
                 # Pull towards the prediction with a curvature of prior_weight times the median
                 # data curvature of the same kind of parameter: negligible for what the images
@@ -703,10 +710,10 @@ class DifferentialTracker:
                         # the support maps' EM step at the accepted pose; the costs do not
                         # change with the weights, the normal equations are made with them
                         em = self._em_weights(terms_by_view, images_t1, accs2, level)
-                        H2, g2 = system2(em)
+                        pending = partial(system2, em)
                     else:
-                        H2, g2 = system2()
-                    state, H, g, cost, accs = candidate, H2, g2, cost2, accs2
+                        pending = system2
+                    state, cost, accs = candidate, cost2, accs2
                     lam = max(lam / 3, 1e-6)
                     if np.abs(delta).max() < s.tolerance:
                         break
