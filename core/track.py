@@ -581,6 +581,16 @@ class _Resume:
         self.frame, self.before, self.state = frame, before, state
 
 
+class _Measure:
+    """A job that measures the silhouettes of blended poses (:func:`track`'s
+    ``blended_fit``) at ``frames``. Hashable by identity, as :class:`_Resume`."""
+
+    __slots__ = ("frames", "states")
+
+    def __init__(self, frames, states):
+        self.frames, self.states = frames, states
+
+
 def _ignore_interrupt():
     """Ctrl-C reaches the whole process group: the parent turns it into a polite stop."""
     import signal
@@ -763,7 +773,10 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
 
     def run(job, report, should_stop):
         """Track from anchor ``job[0]`` to frame ``job[1]`` (inclusive), either direction; a
-        third item (:class:`_Resume`) is where an earlier part of the same pass stopped."""
+        third item (:class:`_Resume`) is where an earlier part of the same pass stopped. A
+        :class:`_Measure` job measures blended poses instead."""
+        if isinstance(job, _Measure):
+            return {f: blended_fit(st, f) for f, st in zip(job.frames, job.states)}
         start, stop = job[:2]
         step = 1 if stop > start else -1
         # each pass draws its own search samples: the same result whichever runs first
@@ -811,32 +824,61 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
             part_of[(a, hi)], part_of[(b, lo)] = (a, b), (b, a)
     tracked = {(a, b): {} for a, b, _ in passes}    # pass -> frame -> (state, report)
     tracked.update({(b, a): {} for a, b in pairs})
+    running = {pair: 2 for pair, (lo, hi) in pairs.items() if lo <= hi}  # jobs of a pair
+    blends = {}         # pair -> [(frame, weight, blended state)]
+    measured = {}       # frame -> silhouette_measures of its blended pose
+
+    def blend(a, b):
+        """The blended frames of the pair ``a < b`` (both passes done), made once."""
+        if (a, b) not in blends:
+            fwd, bwd = tracked[(a, b)], tracked[(b, a)]
+            both = [f for f in range(a + 1, b) if f in fwd and f in bwd]
+            weights = blend_weights([fwd[f][1] for f in both], [bwd[f][1] for f in both])
+            blends[(a, b)] = [(f, w, blend_states(fwd[f][0], bwd[f][0], w))
+                              for f, w in zip(both, weights)]
+        return blends[(a, b)]
 
     def then(job, out):
         nonlocal total
+        if isinstance(job, _Measure):
+            measured.update(out)
+            return []
         tracked[part_of.get(job, job[:2])].update(out)
         pair = part_of.get(job)
-        if pair is None or len(job) > 2:
+        if pair is None:
             return []
         a, b = min(pair), max(pair)
-        lo, hi = pairs[(a, b)]
-        fwd, bwd = tracked[(a, b)], tracked[(b, a)]
-        if hi not in fwd or lo not in bwd:
-            return []       # the other pass is still running
-        to_f, to_b = extend_passes({f: r for f, (_, r) in fwd.items()},
-                                   {f: r for f, (_, r) in bwd.items()}, lo, hi, blend_reach)
+        running[(a, b)] -= 1
         more = []
-        for (start, stop), part, at, to in (((a, b), fwd, hi, to_f), ((b, a), bwd, lo, to_b)):
-            if to != at:
-                step = 1 if stop > start else -1
-                before = part[at - step][0] if at - step != start else state_at(start)
-                job = (start, to, _Resume(at, before, part[at][0]))
-                part_of[job] = (start, stop)
-                more.append(job)
-                total += abs(to - at)
-        if more:
-            log(f"frames {a}-{b}: {len(more)} pass{'es go' if len(more) > 1 else ' goes'} on "
-                "where the other lost the body")
+        if len(job) == 2 and running[(a, b)] == 1:
+            return []       # the other pass is still running
+        if len(job) == 2:
+            lo, hi = pairs[(a, b)]
+            fwd, bwd = tracked[(a, b)], tracked[(b, a)]
+            to_f, to_b = extend_passes({f: r for f, (_, r) in fwd.items()},
+                                       {f: r for f, (_, r) in bwd.items()}, lo, hi,
+                                       blend_reach)
+            for (start, stop), part, at, to in (((a, b), fwd, hi, to_f),
+                                                ((b, a), bwd, lo, to_b)):
+                if to != at:
+                    step = 1 if stop > start else -1
+                    before = part[at - step][0] if at - step != start else state_at(start)
+                    job = (start, to, _Resume(at, before, part[at][0]))
+                    part_of[job] = (start, stop)
+                    more.append(job)
+                    total += abs(to - at)
+            if more:
+                log(f"frames {a}-{b}: {len(more)} pass{'es go' if len(more) > 1 else ' goes'} "
+                    "on where the other lost the body")
+                running[(a, b)] += len(more)
+        if running[(a, b)] == 0:
+            # Both passes are done: the blended poses' silhouettes are measured in the
+            # workers, in as many parts as there are workers, while other passes run.
+            frames_b = [(f, st) for f, _, st in blend(a, b)]
+            for k in range(processes):
+                share = frames_b[k::processes]
+                if share:
+                    more.append(_Measure([f for f, _ in share], [st for _, st in share]))
         return more
 
     def counted(n):
@@ -845,27 +887,30 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
 
     # longest first: even out the workers
     jobs.sort(key=lambda job: -abs(job[1] - job[0]))
+    processes = 1
     if workers > 1 and len(jobs) > 1 and _can_fork():
-        log(f"tracking {len(jobs)} passes in {min(workers, len(jobs))} processes")
-        spare_core = min(workers, len(jobs)) < default_cores()
-        results, cancelled = _run_in_processes(run, jobs, min(workers, len(jobs)), counted,
-                                               cancel, then)
+        processes = min(workers, len(jobs))
+        log(f"tracking {len(jobs)} passes in {processes} processes")
+        spare_core = processes < default_cores()
+        results, cancelled = _run_in_processes(run, jobs, processes, counted, cancel, then)
     else:
         results, cancelled = _run_in_turn(run, jobs, counted, cancel, then)
     if cancelled:
         # what the passes tracked before the cancel reached them
         for job, out in results.items():
-            tracked[part_of.get(job, job[:2])].update(out)
+            if not isinstance(job, _Measure):
+                tracked[part_of.get(job, job[:2])].update(out)
 
     for a, b, stretch in passes:
         fwd, bwd = tracked[(a, b)], tracked.get((b, a), {})
         inner = range(a + 1, b)
         both = [f for f in inner if f in fwd and f in bwd]
         if stretch is not None and both and all(f in fwd or f in bwd for f in inner):
-            weights = blend_weights([fwd[f][1] for f in both], [bwd[f][1] for f in both])
-            for f, w in zip(both, weights):
-                states[f] = blend_states(fwd[f][0], bwd[f][0], w)
-                reports[f] = blend_report(fwd[f][1], bwd[f][1], w, blended_fit(states[f], f))
+            for f, w, state in blend(a, b):
+                states[f] = state
+                # measured by a worker, or here (a cancel stopped the measuring jobs)
+                fit = measured.get(f) or blended_fit(state, f)
+                reports[f] = blend_report(fwd[f][1], bwd[f][1], w, fit)
         # frames only one pass tracked (or a pair cut short by a cancel): keep them all
         for part in (fwd, bwd):
             for f, (st, rep) in part.items():

@@ -151,23 +151,45 @@ class FrozenPlate:
         return self.images[frame]
 
 
-def test_passes_in_worker_processes_give_the_same_track(take):
-    """Three anchors make five passes; forked workers track them side by side and the
-    result is the one tracking them in turn gives, progress included."""
+def test_passes_in_worker_processes_give_the_same_track(take, monkeypatch):
+    """Three anchors make five passes; forked workers track them side by side, and measure
+    the silhouettes of the blended frames, and the result is the one tracking them in turn
+    gives, progress included."""
     if not T._can_fork():
         pytest.skip("worker processes fork: Linux only")
+    import os
+
     scene, joints, body, poses = take
     cams = {c.name: c for c in scene.cameras}
     frozen = {k: FrozenPlate(p) for k, p in synth.scene_plates(scene).items()}
     anchors = anchors_at(scene, joints, (0, 3, 6))
     init = T.Initial(body, {f: poses[f] for f in (0, 3, 6)}, cams)
+    parent = os.getpid()
+    measured_here = []
+    measure = T.silhouette_measures
+
+    def counted(*args, **kw):
+        if os.getpid() == parent:
+            measured_here.append(1)
+        return measure(*args, **kw)
+
+    monkeypatch.setattr(T, "silhouette_measures", counted)
     calls = {1: [], 2: []}
-    res = {w: T.track(frozen, anchors, cams, init=init, workers=w,
-                      progress=lambda d, t, w=w: calls[w].append((d, t))) for w in (1, 2)}
+    here = {}
+    res = {}
+    for w in (1, 2):
+        measured_here.clear()
+        res[w] = T.track(frozen, anchors, cams, init=init, workers=w,
+                         progress=lambda d, t, w=w: calls[w].append((d, t)))
+        here[w] = len(measured_here)
+    # the blended frames 1, 2, 4, 5: measured in the parent when in turn, in the workers else
+    assert here == {1: 4, 2: 0}
     assert list(res[2].frames) == list(range(N))
     assert np.array_equal(res[1].angles, res[2].angles)
     assert np.array_equal(res[1].roots, res[2].roots)
     assert res[1].status == res[2].status
+    for key in ("silhouette_fit", "silhouette_iou", "unexplained", "limb_fit"):
+        assert repr(res[1].extra[key]) == repr(res[2].extra[key]), key
     # 2 + 2 + 2 + 2 + 1 frames tracked (blended stretches twice, the anchors not again),
     # all reported
     assert calls[1][-1] == calls[2][-1] == (9, 9)
