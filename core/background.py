@@ -219,8 +219,10 @@ def signed_distance(mask):
         return np.full(mask.shape, 1e3, np.float32)
     outside = cv2.distanceTransform(1 - m, cv2.DIST_L2, 5)
     inside = cv2.distanceTransform(m, cv2.DIST_L2, 5)
-    # Boundary at the half-pixel between the two sides.
-    return (outside - inside).astype(np.float32) - np.where(m > 0, -0.5, 0.5).astype(np.float32)
+    # Boundary at the half-pixel between the two sides (float32 throughout).
+    sdf = np.subtract(outside, inside, out=outside)
+    sdf -= np.where(m > 0, np.float32(-0.5), np.float32(0.5))
+    return sdf
 
 
 def silhouette_iou(model_mask, observed_mask):

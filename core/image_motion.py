@@ -128,7 +128,7 @@ def image_with_gradients(image):
     image = np.ascontiguousarray(image, dtype=np.float32)
     gx = cv2.Sobel(image, cv2.CV_32F, 1, 0, ksize=3, scale=1 / 8, borderType=cv2.BORDER_REPLICATE)
     gy = cv2.Sobel(image, cv2.CV_32F, 0, 1, ksize=3, scale=1 / 8, borderType=cv2.BORDER_REPLICATE)
-    return np.dstack([image, gx, gy])
+    return cv2.merge([image, gx, gy])        # np.dstack, the same array, faster
 
 
 def sample(stack, uv):
