@@ -202,6 +202,7 @@ class LimbSearch:
         self.groups = limb_groups(body)
         self.point_segment, self.points = interior_points(body.primitives())
         self._blocks = {}
+        self._fit_at = None     # (roots, angles, sdfs, labels, scores) of the last search
 
     def reseed(self, key=()):
         """Restart the draws from a seed made of the search's own and ``key`` (non-negative
@@ -209,7 +210,8 @@ class LimbSearch:
         whatever ran before it."""
         self.rng = np.random.default_rng([self.seed, *(int(k) for k in key)])
 
-    def score(self, roots, angles, segments, cameras, sdfs, rest, unexplained=None):
+    def score(self, roots, angles, segments, cameras, sdfs, rest, unexplained=None,
+              plain=False):
         """Silhouette score of a batch of poses for one limb, mean over points and views.
 
         Parameters
@@ -228,9 +230,15 @@ class LimbSearch:
             Foreground that no part of the model covers (thick blobs only): where a limb
             left behind has gone.
 
+        plain : bool
+            Also return the score without the credit for unexplained foreground (what
+            ``unexplained=None`` gives).
+
         Returns
         -------
         score : array, shape (N,)
+        plain_score : array, shape (N,)
+            With ``plain`` only.
         """
         key = tuple(int(k) for k in segments)
         blocks = self._blocks.get(key)
@@ -241,6 +249,7 @@ class LimbSearch:
         m = sum(len(pts) for _, pts in blocks)
         n = len(angles)
         total = np.zeros(n)
+        total_plain = np.zeros(n) if plain else None
         used = 0
         T = None
         for c, cam in enumerate(cameras):
@@ -272,12 +281,16 @@ class LimbSearch:
                 shared = s > 0
                 shared &= covered
                 s[shared] *= SHARED_CREDIT
+            if plain:
+                total_plain += s.mean(axis=1)
             if unexplained is not None and unexplained[c] is not None:
                 bonus = np.take(unexplained[c], flat)
                 bonus &= ~off
                 s = s + UNEXPLAINED_BONUS * bonus       # float64 from here on
             total += s.mean(axis=1)
             used += 1
+        if plain:
+            return total / max(used, 1), total_plain / max(used, 1)
         return total / max(used, 1)
 
     def search(self, state, sdfs, rest_labels, known=None):
@@ -302,6 +315,7 @@ class LimbSearch:
         angles = state.angles.copy()
         moved = []
         self.last_scores = {}
+        plain = {}
         known = known or [None] * len(sdfs)
         unexplained = [None if d is None or lab is None else
                        unexplained_foreground(d < 0, lab, k)
@@ -310,13 +324,17 @@ class LimbSearch:
         for group in self.groups:
             rest = _rest_of_body(rest_labels, group)
             best, gain = self._search_group(state.roots, angles, group, state.cameras, sdfs,
-                                            rest, unexplained)
+                                            rest, unexplained, plain)
             if gain > self.margin:
                 angles = best
                 moved.append((group.name, float(gain)))
                 # what this limb now covers is explained: other limbs must not go there too
                 unexplained = self._clear(unexplained, state.roots, angles, group,
                                           state.cameras)
+        # Nothing moved: every limb was scored at ``state``, which is what :meth:`fit` asks
+        # for next (with the same silhouettes and support maps).
+        self._fit_at = None if moved else (state.roots.tobytes(), state.angles.tobytes(),
+                                           list(sdfs), list(rest_labels), plain)
         return angles, moved
 
     def _clear(self, unexplained, roots, angles, group, cameras, radius=4):
@@ -348,6 +366,13 @@ class LimbSearch:
             Limb name -> mean score in [-1, 1]: near 1 when the limb lies inside the
             foreground of every view, below 0 when it lies mostly outside.
         """
+        known = self._fit_at
+        if (known is not None and known[0] == state.roots.tobytes()
+                and known[1] == state.angles.tobytes()
+                and len(known[2]) == len(sdfs) and all(a is b for a, b in zip(known[2], sdfs))
+                and len(known[3]) == len(labels)
+                and all(a is b for a, b in zip(known[3], labels))):
+            return dict(known[4])       # the search scored these limbs at this pose
         out = {}
         for group in self.groups:
             rest = _rest_of_body(labels, group)
@@ -355,11 +380,17 @@ class LimbSearch:
                                                state.cameras, sdfs, rest)[0])
         return out
 
-    def _search_group(self, roots, angles, group, cameras, sdfs, rest, unexplained):
+    def _search_group(self, roots, angles, group, cameras, sdfs, rest, unexplained,
+                      plain=None):
+        """Best pose of one limb and the score it gains; ``plain`` (dict), if given, gets the
+        limb's score at ``angles`` without the credit for unexplained foreground."""
         if not group.name.endswith(self.attract):
             unexplained = [None] * len(unexplained)
-        current = self.score(roots, angles[None], group.segments, cameras, sdfs, rest,
-                             unexplained)[0]
+        current, current_plain = self.score(roots, angles[None], group.segments, cameras, sdfs,
+                                            rest, unexplained, plain=True)
+        current = current[0]
+        if plain is not None:
+            plain[group.name] = float(current_plain[0])
         self.last_scores[group.name] = current
         poor = self.poor.get(group.name.split()[-1], 0.0)
         if current >= poor:

@@ -182,3 +182,42 @@ def test_score_equals_the_whole_body_reference(body, cams, rng):
                     got = search.score(rs, angles, segs, cams, sdfs, *args)
                     want = reference_score(search, rs, angles, segs, cams, sdfs, *args)
                     assert np.allclose(got, want, rtol=0, atol=1e-9)
+
+
+def test_fit_after_a_search_that_moved_nothing_reuses_its_scores(body, cams, monkeypatch):
+    """A search that moves no limb has scored every limb at the pose; the fit that follows
+    (same pose, silhouettes and support maps) gives those scores without scoring again, and
+    they are the scores a fresh fit gives, to the bit. A search that moves a limb, or a fit
+    asked about another pose, scores afresh."""
+    p0, p1 = kicked(body)
+    labels = silhouettes(body, p0, cams)
+    # foreground thickly larger than the model: unexplained pixels, which the legs' search
+    # scores credit and the fit's do not
+    import cv2
+
+    grown = [cv2.dilate((lab >= 0).astype(np.uint8), np.ones((17, 17), np.uint8)) > 0
+             for lab in labels]
+    sdfs = [signed_distance(g) for g in grown]
+    state = D.State(np.stack([p0.root] * 3), p0.angles.copy(), list(cams))
+    fresh = LimbSearch(body).fit(state, sdfs, labels)
+    search = LimbSearch(body)
+    angles, moved = search.search(state, sdfs, labels)
+    assert moved == []
+    # the search's own leg scores count the unexplained pixels (a few points fall there)
+    assert search.last_scores["left leg"] != fresh["left leg"]
+    calls = []
+    score = search.score
+    monkeypatch.setattr(search, "score", lambda *a, **k: calls.append(1) or score(*a, **k))
+    assert search.fit(state, sdfs, labels) == fresh
+    assert calls == []
+    other = state.copy()
+    other.angles = p1.angles.copy()
+    search.fit(other, sdfs, labels)
+    assert len(calls) == len(search.groups)
+    # a search that moves a limb leaves nothing to reuse
+    kicked_sdfs = [signed_distance(lab >= 0) for lab in silhouettes(body, p1, cams)]
+    _, moved = search.search(state, kicked_sdfs, labels)
+    assert moved
+    calls.clear()
+    search.fit(state, kicked_sdfs, labels)
+    assert len(calls) == len(search.groups)
