@@ -341,14 +341,17 @@ class DifferentialTracker:
             for c, (im, rr) in enumerate(zip(images_t, renders)):
                 step = 2 ** level
                 stride = s.stride if level == 0 else 1
-                lab = rr.label[::step * stride, ::step * stride]
-                pts = rr.point[::step * stride, ::step * stride]
+                k = step * stride
+                lab = rr.label[::k, ::k]
                 vv, uu = np.nonzero(lab >= 0)
                 if len(vv) > s.max_points:
                     keep = np.linspace(0, len(vv) - 1, s.max_points).astype(int)
                     vv, uu = vv[keep], uu[keep]
                 seg = lab[vv, uu].astype(np.int64)
-                X = pts[vv, uu].astype(np.float64)
+                # the render's surface points at these pixels (``rr.point[vv * k, uu * k]``
+                # to the bit), from its depth image: no point image for the whole view
+                X = surface_points(state.cameras[c], rr.depth, vv * k,
+                                   uu * k).astype(np.float64)
                 ref = se3.apply(world2seg[c][seg], X)
                 gray = im.gray[level]
                 gv, gu = vv * stride, uu * stride
@@ -416,7 +419,7 @@ class DifferentialTracker:
 
     # -- rendering -------------------------------------------------------------------------------
 
-    def render_views(self, state, want=("point",)):
+    def render_views(self, state, want=()):
         def one(c):
             return render(state.cameras[c], self._seg2world(state, c), self.prims, want=want)
 
