@@ -315,7 +315,7 @@ class LimbSearch:
         angles = state.angles.copy()
         moved = []
         self.last_scores = {}
-        plain = {}
+        plain_scores = {}
         known = known or [None] * len(sdfs)
         unexplained = [None if d is None or lab is None else
                        unexplained_foreground(d < 0, lab, k)
@@ -324,7 +324,7 @@ class LimbSearch:
         for group in self.groups:
             rest = _rest_of_body(rest_labels, group)
             best, gain = self._search_group(state.roots, angles, group, state.cameras, sdfs,
-                                            rest, unexplained, plain)
+                                            rest, unexplained, plain_scores)
             if gain > self.margin:
                 angles = best
                 moved.append((group.name, float(gain)))
@@ -334,7 +334,7 @@ class LimbSearch:
         # Nothing moved: every limb was scored at ``state``, which is what :meth:`fit` asks
         # for next (with the same silhouettes and support maps).
         self._fit_at = None if moved else (state.roots.tobytes(), state.angles.tobytes(),
-                                           list(sdfs), list(rest_labels), plain)
+                                           list(sdfs), list(rest_labels), plain_scores)
         return angles, moved
 
     def _clear(self, unexplained, roots, angles, group, cameras, radius=4):
@@ -366,12 +366,13 @@ class LimbSearch:
             Limb name -> mean score in [-1, 1]: near 1 when the limb lies inside the
             foreground of every view, below 0 when it lies mostly outside.
         """
+        def same(xs, ys):
+            return len(xs) == len(ys) and all(x is y for x, y in zip(xs, ys))
+
         known = self._fit_at
         if (known is not None and known[0] == state.roots.tobytes()
                 and known[1] == state.angles.tobytes()
-                and len(known[2]) == len(sdfs) and all(a is b for a, b in zip(known[2], sdfs))
-                and len(known[3]) == len(labels)
-                and all(a is b for a, b in zip(known[3], labels))):
+                and same(known[2], sdfs) and same(known[3], labels)):
             return dict(known[4])       # the search scored these limbs at this pose
         out = {}
         for group in self.groups:
@@ -381,16 +382,16 @@ class LimbSearch:
         return out
 
     def _search_group(self, roots, angles, group, cameras, sdfs, rest, unexplained,
-                      plain=None):
-        """Best pose of one limb and the score it gains; ``plain`` (dict), if given, gets the
-        limb's score at ``angles`` without the credit for unexplained foreground."""
+                      plain_scores=None):
+        """Best pose of one limb and the score it gains; ``plain_scores`` (dict), if given,
+        gets the limb's score at ``angles`` without the credit for unexplained foreground."""
         if not group.name.endswith(self.attract):
             unexplained = [None] * len(unexplained)
         current, current_plain = self.score(roots, angles[None], group.segments, cameras, sdfs,
                                             rest, unexplained, plain=True)
         current = current[0]
-        if plain is not None:
-            plain[group.name] = float(current_plain[0])
+        if plain_scores is not None:
+            plain_scores[group.name] = float(current_plain[0])
         self.last_scores[group.name] = current
         poor = self.poor.get(group.name.split()[-1], 0.0)
         if current >= poor:

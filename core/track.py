@@ -550,9 +550,7 @@ def default_cores():
 
 def default_workers():
     """Worker processes for the passes when none are asked for: one per core, at most 4."""
-    import os
-
-    return min(os.cpu_count() or 1, 4)
+    return min(default_cores(), 4)
 
 
 def _can_fork():
