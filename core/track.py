@@ -894,9 +894,11 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
     else:
         results, cancelled = _run_in_turn(run, jobs, counted, cancel, then)
     if cancelled:
-        # what the passes tracked before the cancel reached them
+        # what the passes tracked and measured before the cancel reached them
         for job, out in results.items():
-            if not isinstance(job, _Measure):
+            if isinstance(job, _Measure):
+                measured.update(out)
+            else:
                 tracked[part_of.get(job, job[:2])].update(out)
 
     for a, b, stretch in passes:
