@@ -520,6 +520,8 @@ def finetune(plates, anchors, cameras, *, result=None, init=None, frames=None, o
     if init is None and inside:
         res = initialize(inside, {v: cameras[v] for v in views}, template=template,
                          calibrated=True, views=views, flips=flips)
+        for note in res.flip_notes():
+            say(note)
         init = T.Initial(res.body, res.poses, res.cameras, None, list(res.warnings))
     # Progress over the whole job: a track's steps, the fit's steps, the re-track's steps.
     stage = {"base": 0, "steps": None}
