@@ -97,6 +97,7 @@ def _draw_init_notes(box, settings):
     flips = parse_flips(settings.depth_flips)
     ambiguous = parse_flips(settings.ambiguous_parts)
     box.label(text="Seen in one view: flip what looks wrong in depth")
+    box.prop(settings, "camera_tilt")
     for frame in frames:
         row = box.row(align=True)
         row.label(text=f"Frame {frame}")

@@ -65,6 +65,13 @@ class Take:
     fps: float = 30.0
     extra: dict = field(default_factory=dict)
     flips: dict = None      # anchor frame -> body parts the animator turned in depth
+    camera_tilt: float = 0.0    # degrees an uncalibrated one-view camera looks down
+
+    def tilt(self):
+        """``camera_tilt`` for :func:`core.initialize.initialize` (uncalibrated takes)."""
+        from ..core.initialize import CAMERA_TILT_DEG
+
+        return (float(self.camera_tilt), CAMERA_TILT_DEG[1])
 
     def close(self):
         for plate in self.plates.values():
@@ -121,7 +128,8 @@ def gather(context, *, need_markers=True):
     anchor_frames = {a.frame for a in anchors}
     flips = {f: p for f, p in parse_flips(settings.depth_flips).items() if f in anchor_frames}
     return Take(plates, paths, offsets, anchors, cameras, frames, settings.template.lower(),
-                settings.tracker.lower(), n, fps, flips=flips or None)
+                settings.tracker.lower(), n, fps, flips=flips or None,
+                camera_tilt=settings.camera_tilt)
 
 
 def parse_flips(text):
@@ -154,7 +162,7 @@ def initialize(take, *, progress=None, cancel=None):
         {v: p.image_size for v, p in take.plates.items()}
     result = call(module.initialize, inside, cameras, template=take.template,
                   calibrated=take.cameras is not None, views=list(take.plates),
-                  flips=take.flips_at(inside))
+                  flips=take.flips_at(inside), camera_tilt=take.tilt())
     if progress:
         progress(1, 1)
     return result
@@ -169,7 +177,8 @@ def _fingerprint(take):
     cameras = None if take.cameras is None else tuple(
         (v, tuple(round(x, 6) for x in c.P.ravel())) for v, c in sorted(take.cameras.items()))
     flips = tuple(sorted((f, tuple(p)) for f, p in (take.flips or {}).items()))
-    return take.template, cameras, clicks, flips
+    tilt = round(float(take.camera_tilt), 3) if take.cameras is None else None
+    return take.template, cameras, clicks, flips, tilt
 
 
 def remember_initial(scene, init, take):
@@ -196,6 +205,8 @@ def track(take, *, init=None, progress=None, cancel=None, log=None):
     flips = take.flips_at([a for a in take.anchors if a.frame in take.frames])
     if flips and init is None:
         options["flips"] = flips
+    if init is None and take.cameras is None and take.tracker == "differential":
+        options["camera_tilt"] = take.tilt()
     if take.tracker == "differential":
         module = _import("track", "the differential tracker")
         return call(module.track, take.plates, take.anchors, take.cameras, **options)

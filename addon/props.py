@@ -108,6 +108,12 @@ class ZOOPRAXIS_PG_settings(bpy.types.PropertyGroup):
         name="Ambiguous Parts",
         description="FRAME:PART;... that another depth fits about as well (last "
                     "initialization)")
+    camera_tilt: FloatProperty(
+        name="Camera Looks Down", default=0.0, min=-80.0, max=80.0, step=100, precision=0,
+        description="Uncalibrated, at anchor frames clicked in one view: how many degrees the "
+                    "camera looks down at the upright subject (give or take 10; one view "
+                    "cannot see the subject's lean towards or away from it). Used by "
+                    "Initialize and Track")
     depth_flips: StringProperty(
         name="Depth Flips",
         description="FRAME:PART;... turned to their other depth by the animator (used by "

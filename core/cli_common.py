@@ -1,5 +1,7 @@
 """Argument helpers shared by the commands."""
 
+import numpy as np
+
 from .errors import ZoopraxisError
 
 
@@ -44,6 +46,49 @@ def parse_flips(items):
         if part not in out.setdefault(frame, []):
             out[frame].append(part)
     return out or None
+
+
+def add_camera_tilt_argument(parser):
+    """``--camera-tilt DOWN[:SPREAD]`` for frames clicked in one uncalibrated view."""
+    from .initialize import CAMERA_TILT_DEG
+
+    down, spread = CAMERA_TILT_DEG
+    parser.add_argument("--camera-tilt", default=None, metavar="DOWN[:SPREAD]",
+                        help="uncalibrated, at an anchor frame clicked in one view: how many "
+                             "degrees the camera looks down at the (upright) subject, give or "
+                             f"take SPREAD (default {down:g}:{spread:g}: about level); 'none' "
+                             "for no such prior")
+
+
+def parse_camera_tilt(text):
+    """``--camera-tilt`` as ``(down, spread)`` degrees (the default one if ``text`` is None),
+    or None for 'none'.
+
+    Raises
+    ------
+    ZoopraxisError
+        Not DOWN or DOWN:SPREAD in range.
+    """
+    from .initialize import CAMERA_TILT_DEG
+
+    if text is None:
+        return CAMERA_TILT_DEG
+    if text.strip().lower() == "none":
+        return None
+    parts = text.split(":")
+    try:
+        values = [float(x) for x in parts]
+    except ValueError:
+        values = []
+    if len(parts) not in (1, 2) or len(values) != len(parts) \
+            or not all(np.isfinite(values)):
+        raise ZoopraxisError(f"--camera-tilt {text}: expected DOWN or DOWN:SPREAD in degrees "
+                             "(say 15:10), or none")
+    down, spread = values[0], values[1] if len(values) == 2 else CAMERA_TILT_DEG[1]
+    if not (abs(down) < 90.0 and 0.0 < spread <= 90.0):
+        raise ZoopraxisError(f"--camera-tilt {text}: the tilt must lie between -90 and 90 "
+                             "degrees and the spread between 0 (excluded) and 90")
+    return down, spread
 
 
 def add_output_arguments(parser, what):

@@ -4,7 +4,8 @@ import argparse
 import json
 import sys
 
-from .cli_common import add_output_arguments, check_output, parse_flips
+from .cli_common import (add_camera_tilt_argument, add_output_arguments, check_output,
+                         parse_camera_tilt, parse_flips)
 from .errors import ZoopraxisError
 
 
@@ -30,6 +31,7 @@ def build_parser():
                    help="at an anchor frame clicked in one view, turn a body part to its other "
                         "depth (PART: left-arm, right-arm, left-leg, right-leg or body); "
                         "repeat for more")
+    add_camera_tilt_argument(p)
     add_output_arguments(p, "init.json")
     return p
 
@@ -48,6 +50,10 @@ def main(argv):
         raise ZoopraxisError(f"--template: unknown body template '{args.template}' (expected "
                              f"one of {', '.join(TEMPLATES)})")
     flips = parse_flips(args.flip)
+    camera_tilt = parse_camera_tilt(args.camera_tilt)
+    if args.camera_tilt is not None and args.calibration:
+        raise ZoopraxisError("--camera-tilt is for uncalibrated views: the calibration gives "
+                             "the cameras' tilt")
     plates = open_plates(parse_plate_options(args.plate))
     views = list(plates)
     anchors = read_markers(args.markers)
@@ -69,7 +75,7 @@ def main(argv):
     result = initialize(anchors, cameras, template=args.template,
                         calibrated=bool(args.calibration), fit_dims=not args.fixed_dims,
                         views=views, pose_prior=None if args.no_pose_prior else "default",
-                        flips=flips)
+                        flips=flips, camera_tilt=camera_tilt)
     print("body dimensions (m): " + ", ".join(f"{name} {result.body.dims[name]:.3f}"
                                              for name in LENGTH_DIMS))
     print("rms per view (px): " + ", ".join(f"{view} {rms:.2f}"

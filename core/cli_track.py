@@ -3,7 +3,8 @@
 import argparse
 import time
 
-from .cli_common import (add_output_arguments, check_output, open_plates, parse_flips,
+from .cli_common import (add_camera_tilt_argument, add_output_arguments, check_output,
+                         open_plates, parse_camera_tilt, parse_flips,
                          parse_view_values)
 from .errors import ZoopraxisError
 from .progress import ConsoleProgress
@@ -43,6 +44,7 @@ def build_parser():
                    help="at an anchor frame clicked in one view, turn a body part to its other "
                         "depth (PART: left-arm, right-arm, left-leg, right-leg or body); "
                         "repeat for more")
+    add_camera_tilt_argument(p)
     add_output_arguments(p, "result.json")
     return p
 
@@ -74,6 +76,10 @@ def main(argv):
     if args.refine_body and cameras is None:
         raise ZoopraxisError("--refine-body needs --calibration (calibrated views)")
     flips = parse_flips(args.flip)
+    camera_tilt = parse_camera_tilt(args.camera_tilt)
+    if args.camera_tilt is not None and cameras is not None:
+        raise ZoopraxisError("--camera-tilt is for uncalibrated views: the calibration gives "
+                             "the cameras' tilt")
     stop = _StopOnInterrupt()
     kwargs = dict(frames=frames, offsets=offsets, template=args.template, flips=flips,
                   max_size=args.max_size, progress=ConsoleProgress("track"), cancel=stop,
@@ -88,7 +94,8 @@ def main(argv):
             from .track import default_workers, track
 
             workers = args.workers or default_workers()
-            result = track(opened, anchors, cameras, workers=workers, **kwargs)
+            result = track(opened, anchors, cameras, workers=workers, camera_tilt=camera_tilt,
+                           **kwargs)
         else:
             try:
                 from . import hybrid

@@ -24,6 +24,7 @@ from .body import Pose
 from .camera import ScaledOrthoCamera
 from .differential import DifferentialTracker, Settings, State, prepare_images, thread_pool
 from .errors import ZoopraxisError
+from .initialize import CAMERA_TILT_DEG
 from .markers import check_markers
 from .plates import to_gray_float
 from .recover import unexplained_foreground, unexplained_share
@@ -657,7 +658,7 @@ def _run_in_processes(run, jobs, workers, progress, cancel, then=None):
 
 def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template="full",
           settings=None, init=None, max_size=960, progress=None, cancel=None, log=None,
-          workers=1, blend_reach=BLEND_REACH, flips=None):
+          workers=1, blend_reach=BLEND_REACH, flips=None, camera_tilt=CAMERA_TILT_DEG):
     """Track a take with the differential tracker.
 
     Parameters
@@ -686,6 +687,10 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
     flips : dict of int to list of str, optional
         Body parts to turn to their other depth at anchor frames clicked in one view
         (:func:`initialize.initialize`), when ``init`` is not given.
+    camera_tilt : (float, float) or None
+        Uncalibrated, when ``init`` is not given: how far the camera of an anchor frame
+        clicked in one view looks down at the subject, give or take how much (degrees;
+        :func:`initialize.initialize`).
 
     Returns
     -------
@@ -701,7 +706,8 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
 
         res = initialize(inside, {v: cameras[v] if calibrated else tuple(plates[v].image_size)
                                   for v in views},
-                         template=template, calibrated=calibrated, views=views, flips=flips)
+                         template=template, calibrated=calibrated, views=views, flips=flips,
+                         camera_tilt=camera_tilt)
         for note in res.flip_notes():
             log(note)
         init = Initial(res.body, res.poses, res.cameras, getattr(res, "view_cameras", None),

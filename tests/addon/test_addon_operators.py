@@ -439,6 +439,9 @@ class _Layout:
         self.log.append(("operator", idname, text, icon, depress))
         return type("Props", (), {})()
 
+    def prop(self, data, name, **options):
+        self.log.append(("prop", name))
+
 
 def test_one_view_flips_in_depth_from_the_panel(blender):
     """Initialize from one view: the panel offers each limb of the anchor frames to flip in
@@ -484,6 +487,37 @@ def test_one_view_flips_in_depth_from_the_panel(blender):
     with pytest.raises(RuntimeError, match="unknown body part 'tail'"):
         bpy.ops.zoopraxis.flip_depth(frame=0, part="tail")
     assert settings.depth_flips == ""
+
+
+def test_one_view_camera_tilt_from_the_panel(blender):
+    """The panel's "Camera Looks Down" reaches the one-view fit: the sample's level cam0 is
+    fitted about level by default (-4.6 degrees); said to look down 30 degrees, the remembered
+    fit is stale and the new one looks further down (-9.5: the prior is a give-or-take-10
+    one, and this close view's clicks hold the fit near level)."""
+    from zoopraxis.addon import pipeline
+    from zoopraxis.addon.panels import _draw_init_notes
+
+    def lean():
+        take = pipeline.gather(blender)
+        init = pipeline.initial_for(blender.scene, take)
+        take.close()
+        if init is None:
+            return None
+        R = init.cameras["cam0"].R
+        return float(np.degrees(np.arcsin(R[2, 2])))
+
+    settings = load_sample(("cam0",))
+    bpy.ops.zoopraxis.import_markers(filepath=str(SAMPLE / "markers.json"))
+    assert bpy.ops.zoopraxis.initialize() == {'FINISHED'}
+    level = lean()
+    assert abs(level) < 12.0
+    log = []
+    _draw_init_notes(_Layout(log), settings)
+    assert ("prop", "camera_tilt") in log
+    settings.camera_tilt = 30.0
+    assert lean() is None                   # made for another tilt: Track initializes again
+    assert bpy.ops.zoopraxis.initialize() == {'FINISHED'}
+    assert lean() < level - 3.0
 
 
 def test_flip_reports_the_initialization_error(blender):

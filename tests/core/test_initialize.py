@@ -723,6 +723,36 @@ def test_init_command_one_view_with_and_without_the_pose_prior(tmp_path, capsys)
     assert joints[0].shape == joints[1].shape == (17, 3)
 
 
+def test_init_and_track_commands_take_the_camera_tilt(tmp_path, capsys):
+    """``--camera-tilt DOWN[:SPREAD]`` reaches the one-view fit (the sample's cam0 looks at the
+    walker about level; told 30 degrees down, give or take 3, the fitted camera looks down
+    20-35); bad values and calibrated views are refused in one line."""
+    root, markers, _ = _sample_first_anchor_in_cam0(tmp_path)
+    leans = []
+    for tilt in ([], ["--camera-tilt", "30:3"]):
+        out = tmp_path / f"init{len(tilt)}.json"
+        args = ["init", "--markers", str(markers), f"--plate=cam0={root}cam0",
+                "--out", str(out), *tilt]
+        assert cli.main(args) == 0, capsys.readouterr().err
+        R = np.array(json.loads(out.read_text())["anchors"][0]["views"]["cam0"]["camera"]["R"])
+        leans.append(_lean(R))
+    assert abs(leans[0]) < 12.0 and -35.0 < leans[1] < -20.0
+    capsys.readouterr()
+    base = ["init", "--markers", str(markers), f"--plate=cam0={root}cam0",
+            "--out", str(tmp_path / "bad.json")]
+    for value, message in (("steep", "expected DOWN or DOWN:SPREAD"),
+                           ("95", "between -90 and 90"), ("10:0", "between -90 and 90")):
+        assert cli.main(base + ["--camera-tilt", value]) == 2
+        err = capsys.readouterr().err
+        assert f"--camera-tilt {value}: " in err and message in err and err.count("\n") == 1
+    calibrated = ["track", "--markers", root + "markers.json", "--calibration",
+                  root + "calibration.json", "--out", str(tmp_path / "r.json"),
+                  "--camera-tilt", "10"] + [f"--plate=cam{i}={root}cam{i}" for i in range(3)]
+    for command in (calibrated, ["init"] + calibrated[1:]):
+        assert cli.main(command) == 2
+        assert "--camera-tilt is for uncalibrated views" in capsys.readouterr().err
+
+
 def test_init_command_flips_a_limb_and_says_how(tmp_path, capsys):
     root, markers, frame = _sample_first_anchor_in_cam0(tmp_path)
     base = ["init", "--markers", str(markers), f"--plate=cam0={root}cam0"]
