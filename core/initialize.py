@@ -190,7 +190,7 @@ PRIOR_COMPONENTS = 8
 # from about level: its line of sight this many degrees below the body's horizontal, give or
 # take the second number (a camera's pitch and the pelvis's own lean together; CMU walks lean
 # their pelvis 4-10 degrees). One view cannot see how the pelvis leans towards or away from
-# it: without this the fit tilts the whole body by up to 16 degrees in depth to make its
+# it: without this the fit tilts the whole body by up to 19 degrees in depth to make its
 # angles likelier.
 CAMERA_TILT_DEG = (0.0, 10.0)
 
@@ -1582,7 +1582,8 @@ class _Fit:
 
     def _score(self, state, f, angles):
         """Negative log posterior (nats, up to a constant) of a frame's state with each row of
-        ``angles``: the clicks under CLICK_SIGMA_PX noise and the learned pose prior."""
+        ``angles``: the clicks under CLICK_SIGMA_PX noise, the learned pose prior and the
+        camera tilt prior."""
         return self._click_costs(state, f, angles) / CLICK_SIGMA_PX**2 + self.prior.cost(angles) \
             + self._tilt_cost(state)
 
@@ -1723,9 +1724,11 @@ class _Fit:
                 parts.append(name)
 
     def _posterior(self, state, f):
-        """Clicks (and the learned prior, if any) of a one-frame state, nats."""
+        """Clicks (and the learned prior, if any, and the camera tilt prior) of a one-frame
+        state, nats."""
         clicks = float(self._click_costs(state, f, state.angles)[0]) / CLICK_SIGMA_PX**2
-        return clicks + (0.0 if self.prior is None else float(self.prior.cost(state.angles)[0]))
+        prior = 0.0 if self.prior is None else float(self.prior.cost(state.angles)[0])
+        return clicks + prior + self._tilt_cost(state)
 
     def _apply_flips(self, state, f):
         """Turn the parts the animator named for frame ``f`` to their other depth."""
