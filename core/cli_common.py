@@ -69,7 +69,7 @@ def parse_camera_tilt(text):
     ZoopraxisError
         Not DOWN or DOWN:SPREAD in range.
     """
-    from .initialize import CAMERA_TILT_DEG
+    from .initialize import CAMERA_TILT_DEG, check_camera_tilt
 
     if text is None:
         return CAMERA_TILT_DEG
@@ -84,11 +84,8 @@ def parse_camera_tilt(text):
             or not all(np.isfinite(values)):
         raise ZoopraxisError(f"--camera-tilt {text}: expected DOWN or DOWN:SPREAD in degrees "
                              "(say 15:10), or none")
-    down, spread = values[0], values[1] if len(values) == 2 else CAMERA_TILT_DEG[1]
-    if not (abs(down) < 90.0 and 0.0 < spread <= 90.0):
-        raise ZoopraxisError(f"--camera-tilt {text}: the tilt must lie between -90 and 90 "
-                             "degrees and the spread between 0 (excluded) and 90")
-    return down, spread
+    return check_camera_tilt((values[0], values[1] if len(values) == 2 else CAMERA_TILT_DEG[1]),
+                             f"--camera-tilt {text}")
 
 
 def add_output_arguments(parser, what):

@@ -1375,10 +1375,7 @@ def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None,
         fit = _UncalibratedFit(kin, obs, weights, sizes, views, anchors, dims0, fit_dims,
                                warnings)
         if camera_tilt is not None:
-            down, spread = (float(x) for x in camera_tilt)
-            if not (abs(down) < 90.0 and 0.0 < spread <= 90.0):
-                raise ZoopraxisError(f"camera tilt {down:g}:{spread:g}: expected a tilt "
-                                     "between -90 and 90 degrees and a spread of 0-90")
+            down, spread = check_camera_tilt(camera_tilt)
             # A camera looking down sees the body's up axis turned away from it.
             fit.tilt = (-np.sin(np.radians(down)), np.sin(np.radians(spread)))
     if isinstance(pose_prior, str) and pose_prior == "default":
@@ -1390,6 +1387,23 @@ def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None,
         pose_prior.with_broad(kin.prior_mean, kin.prior_sigma)
     fit.flips = flips
     return fit.run()
+
+
+def check_camera_tilt(camera_tilt, what=None):
+    """``(down, spread)`` degrees as floats (``initialize``'s ``camera_tilt``).
+
+    Raises
+    ------
+    ZoopraxisError
+        A tilt outside -90..90 degrees or a spread outside 0 (excluded)..90, named by
+        ``what`` (default: the values).
+    """
+    down, spread = (float(x) for x in camera_tilt)
+    if not (abs(down) < 90.0 and 0.0 < spread <= 90.0):
+        raise ZoopraxisError(f"{what or f'camera tilt {down:g}:{spread:g}'}: the tilt must lie "
+                             "between -90 and 90 degrees and the spread between 0 (excluded) "
+                             "and 90")
+    return down, spread
 
 
 def flip_part(name):
