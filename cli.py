@@ -27,6 +27,8 @@ COMMANDS = {
     "bake": ("core.cli_bake", "main", "key a tracked take onto an armature; write .blend, BVH, FBX"),
     "calibrate": ("core.cli_calibrate", "main", "calibrate the cameras from a board in the plates"),
     "init": ("core.cli_init", "main", "fit the body to the clicked joints of the anchor frames"),
+    "prior": ("core.cli_prior", "main",
+              "learn the pose prior of one-view frames from captures or tracks of a motion"),
 }
 
 

@@ -11,6 +11,7 @@ to the workers, which may then run on another thread: no bpy there.
 
 import importlib
 import inspect
+import os
 from dataclasses import dataclass, field
 
 from ..core.errors import ZoopraxisError
@@ -66,6 +67,11 @@ class Take:
     extra: dict = field(default_factory=dict)
     flips: dict = None      # anchor frame -> body parts the animator turned in depth
     camera_tilt: float = 0.0    # degrees an uncalibrated one-view camera looks down
+    pose_prior: str = ""        # a pose prior file for one-view anchors ("": the shipped one)
+
+    def prior(self):
+        """``pose_prior`` for :func:`core.initialize.initialize`."""
+        return self.pose_prior or "default"
 
     def tilt(self):
         """``camera_tilt`` for :func:`core.initialize.initialize` (uncalibrated takes)."""
@@ -125,11 +131,19 @@ def gather(context, *, need_markers=True):
             plate.close()
         raise
     fps = scene.render.fps / scene.render.fps_base
+    import bpy
+
+    pose_prior = bpy.path.abspath(settings.pose_prior_path) if settings.pose_prior_path else ""
+    if pose_prior and not os.path.isfile(pose_prior):
+        for plate in plates.values():
+            plate.close()
+        raise ZoopraxisError(f"pose prior {pose_prior}: no such file (clear the field for the "
+                             "shipped prior)")
     anchor_frames = {a.frame for a in anchors}
     flips = {f: p for f, p in parse_flips(settings.depth_flips).items() if f in anchor_frames}
     return Take(plates, paths, offsets, anchors, cameras, frames, settings.template.lower(),
                 settings.tracker.lower(), n, fps, flips=flips or None,
-                camera_tilt=settings.camera_tilt)
+                camera_tilt=settings.camera_tilt, pose_prior=pose_prior)
 
 
 def parse_flips(text):
@@ -162,14 +176,16 @@ def initialize(take, *, progress=None, cancel=None):
         {v: p.image_size for v, p in take.plates.items()}
     result = call(module.initialize, inside, cameras, template=take.template,
                   calibrated=take.cameras is not None, views=list(take.plates),
-                  flips=take.flips_at(inside), camera_tilt=take.tilt())
+                  flips=take.flips_at(inside), camera_tilt=take.tilt(),
+                  pose_prior=take.prior())
     if progress:
         progress(1, 1)
     return result
 
 
 def _fingerprint(take):
-    """What an initialization depends on: template, calibration and the anchors' clicks."""
+    """What an initialization depends on: template, calibration, the anchors' clicks and the
+    animator's choices for one-view anchors (flips, camera tilt, pose prior file)."""
     clicks = tuple((a.frame, v, j, round(u, 2), round(w, 2))
                    for a in take.anchors if a.frame in take.frames
                    for v, joints in sorted(a.views.items())
@@ -178,7 +194,13 @@ def _fingerprint(take):
         (v, tuple(round(x, 6) for x in c.P.ravel())) for v, c in sorted(take.cameras.items()))
     flips = tuple(sorted((f, tuple(p)) for f, p in (take.flips or {}).items()))
     tilt = round(float(take.camera_tilt), 3) if take.cameras is None else None
-    return take.template, cameras, clicks, flips, tilt
+    prior = None
+    if take.pose_prior:
+        try:
+            prior = (take.pose_prior, os.stat(take.pose_prior).st_mtime_ns)
+        except OSError:
+            prior = (take.pose_prior, None)
+    return take.template, cameras, clicks, flips, tilt, prior
 
 
 def remember_initial(scene, init, take):
@@ -205,6 +227,8 @@ def track(take, *, init=None, progress=None, cancel=None, log=None):
     flips = take.flips_at([a for a in take.anchors if a.frame in take.frames])
     if flips and init is None:
         options["flips"] = flips
+    if init is None and take.pose_prior:
+        options["pose_prior"] = take.prior()
     if init is None and take.cameras is None and take.tracker == "differential":
         options["camera_tilt"] = take.tilt()
     if take.tracker == "differential":

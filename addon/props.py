@@ -114,6 +114,12 @@ class ZOOPRAXIS_PG_settings(bpy.types.PropertyGroup):
                     "camera looks down at the upright subject (give or take 10; one view "
                     "cannot see the subject's lean towards or away from it). Used by "
                     "Initialize and Track")
+    pose_prior_path: StringProperty(
+        name="Pose Prior", subtype='FILE_PATH',
+        description="At anchor frames clicked in one view, the limbs' depth is chosen by a "
+                    "pose prior: empty for the shipped one, or a prior file learned from "
+                    "takes of the motion at hand ('zoopraxis prior'). Used by Initialize and "
+                    "Track")
     depth_flips: StringProperty(
         name="Depth Flips",
         description="FRAME:PART;... turned to their other depth by the animator (used by "

@@ -60,6 +60,37 @@ def add_camera_tilt_argument(parser):
                              "for no such prior")
 
 
+def add_pose_prior_arguments(parser):
+    """``--pose-prior FILE`` and ``--no-pose-prior`` for frames clicked in one view."""
+    parser.add_argument("--pose-prior", default=None, metavar="FILE",
+                        help="at an anchor frame clicked in one view, choose the limbs' depth "
+                             "with this pose prior (from 'zoopraxis prior': takes of the kind "
+                             "of motion at hand) instead of the shipped one")
+    parser.add_argument("--no-pose-prior", action="store_true",
+                        help="at an anchor frame clicked in one view, choose the limbs' depth "
+                             "without a pose prior learned from motion capture")
+
+
+def parse_pose_prior(args, template):
+    """``initialize``'s ``pose_prior`` from ``--pose-prior`` / ``--no-pose-prior``: the file
+    read and checked against the template, None, or "default".
+
+    Raises
+    ------
+    ZoopraxisError
+        Both options, or a missing, unreadable or mismatched file (naming it).
+    """
+    from .initialize import resolve_pose_prior
+
+    if args.pose_prior is not None and args.no_pose_prior:
+        raise ZoopraxisError("give --pose-prior or --no-pose-prior, not both")
+    if args.no_pose_prior:
+        return None
+    if args.pose_prior is None:
+        return "default"
+    return resolve_pose_prior(args.pose_prior, template)
+
+
 def parse_camera_tilt(text):
     """``--camera-tilt`` as ``(down, spread)`` degrees (the default one if ``text`` is None),
     or None for 'none'.

@@ -4,8 +4,9 @@ import argparse
 import json
 import sys
 
-from .cli_common import (add_camera_tilt_argument, add_output_arguments, check_output,
-                         parse_camera_tilt, parse_flips)
+from .cli_common import (add_camera_tilt_argument, add_output_arguments,
+                         add_pose_prior_arguments, check_output, parse_camera_tilt, parse_flips,
+                         parse_pose_prior)
 from .errors import ZoopraxisError
 
 
@@ -24,9 +25,7 @@ def build_parser():
                    help="body template: full, muybridge, sidenbladh or yamamoto (full)")
     p.add_argument("--fixed-dims", action="store_true",
                    help="keep the template's body dimensions instead of fitting them")
-    p.add_argument("--no-pose-prior", action="store_true",
-                   help="in frames clicked in one view, choose the limbs' depth without the "
-                        "pose prior learned from motion capture")
+    add_pose_prior_arguments(p)
     p.add_argument("--flip", action="append", default=[], metavar="FRAME:PART",
                    help="at an anchor frame clicked in one view, turn a body part to its other "
                         "depth (PART: left-arm, right-arm, left-leg, right-leg or body); "
@@ -51,6 +50,7 @@ def main(argv):
                              f"one of {', '.join(TEMPLATES)})")
     flips = parse_flips(args.flip)
     camera_tilt = parse_camera_tilt(args.camera_tilt)
+    pose_prior = parse_pose_prior(args, args.template)
     if args.camera_tilt is not None and args.calibration:
         raise ZoopraxisError("--camera-tilt is for uncalibrated views: the calibration gives "
                              "the cameras' tilt")
@@ -74,7 +74,7 @@ def main(argv):
           flush=True)
     result = initialize(anchors, cameras, template=args.template,
                         calibrated=bool(args.calibration), fit_dims=not args.fixed_dims,
-                        views=views, pose_prior=None if args.no_pose_prior else "default",
+                        views=views, pose_prior=pose_prior,
                         flips=flips, camera_tilt=camera_tilt)
     print("body dimensions (m): " + ", ".join(f"{name} {result.body.dims[name]:.3f}"
                                              for name in LENGTH_DIMS))

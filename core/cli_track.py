@@ -3,9 +3,9 @@
 import argparse
 import time
 
-from .cli_common import (add_camera_tilt_argument, add_output_arguments, check_output,
-                         open_plates, parse_camera_tilt, parse_flips,
-                         parse_view_values)
+from .cli_common import (add_camera_tilt_argument, add_output_arguments,
+                         add_pose_prior_arguments, check_output, open_plates, parse_camera_tilt,
+                         parse_flips, parse_pose_prior, parse_view_values)
 from .errors import ZoopraxisError
 from .progress import ConsoleProgress
 
@@ -45,6 +45,7 @@ def build_parser():
                         "depth (PART: left-arm, right-arm, left-leg, right-leg or body); "
                         "repeat for more")
     add_camera_tilt_argument(p)
+    add_pose_prior_arguments(p)
     add_output_arguments(p, "result.json")
     return p
 
@@ -80,8 +81,10 @@ def main(argv):
     if args.camera_tilt is not None and cameras is not None:
         raise ZoopraxisError("--camera-tilt is for uncalibrated views: the calibration gives "
                              "the cameras' tilt")
+    pose_prior = parse_pose_prior(args, args.template)
     stop = _StopOnInterrupt()
     kwargs = dict(frames=frames, offsets=offsets, template=args.template, flips=flips,
+                  pose_prior=pose_prior,
                   max_size=args.max_size, progress=ConsoleProgress("track"), cancel=stop,
                   log=lambda msg: print(f"track: {msg}", flush=True))
     t0 = time.perf_counter()

@@ -453,7 +453,8 @@ def _sample_frames(result, n):
 
 def finetune(plates, anchors, cameras, *, result=None, init=None, frames=None, offsets=None,
              template="full", settings=None, max_size=960, backgrounds=None, samples=12,
-             iterations=10, progress=None, cancel=None, log=None, flips=None):
+             iterations=10, progress=None, cancel=None, log=None, flips=None,
+             pose_prior="default"):
     """Track, refine the body's lengths on the images of the whole take, track again (§2.7).
 
     Parameters
@@ -482,6 +483,9 @@ def finetune(plates, anchors, cameras, *, result=None, init=None, frames=None, o
         On cancel the work done is kept: the first track (partial or whole) if the cancel came
         before the re-track finished.
     log : callable(str), optional
+    flips, pose_prior : optional
+        When ``init`` is not given, for anchor frames clicked in one view: the body parts
+        turned to their other depth and the pose prior (:func:`initialize.initialize`).
 
     Returns
     -------
@@ -519,7 +523,7 @@ def finetune(plates, anchors, cameras, *, result=None, init=None, frames=None, o
     inside = [a for a in anchors if frames.start <= a.frame < frames.stop]
     if init is None and inside:
         res = initialize(inside, {v: cameras[v] for v in views}, template=template,
-                         calibrated=True, views=views, flips=flips)
+                         calibrated=True, views=views, flips=flips, pose_prior=pose_prior)
         for note in res.flip_notes():
             say(note)
         init = T.Initial(res.body, res.poses, res.cameras, None, list(res.warnings))
@@ -598,7 +602,8 @@ def finetune(plates, anchors, cameras, *, result=None, init=None, frames=None, o
     # The anchors' poses for the new body: the fit's, or the clicks fitted again with the
     # lengths held, whichever lies nearer the clicks.
     again = initialize(inside, {v: cameras[v] for v in views}, template=body1.template,
-                       calibrated=True, dims=body1.dims, fit_dims=False, views=views)
+                       calibrated=True, dims=body1.dims, fit_dims=False, views=views,
+                       flips=flips, pose_prior=pose_prior)
     refined = dict(zip(picked, fit.poses))
 
     def click_rms(pose, anchor):

@@ -225,7 +225,8 @@ def _worse(a, b):
 def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, seed=2345,
           frames=None, offsets=None, template="full", max_size=960, progress=None, cancel=None,
           log=None, init=None, settings=None, prior="smooth", recentre=RECENTRE,
-          prior_scale=None, layers=None, silhouette=None, blend_reach=BLEND_REACH, flips=None):
+          prior_scale=None, layers=None, silhouette=None, blend_reach=BLEND_REACH, flips=None,
+          pose_prior="default"):
     """Track a take with the particle filter, alone or as the coarse stage of the hybrid.
 
     Parameters
@@ -275,6 +276,9 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
     blend_reach : int or None
         Between two anchors, how many frames past the middle each pass tracks at first
         (:data:`track.BLEND_REACH`); None tracks both passes from anchor to anchor.
+    flips, pose_prior : optional
+        When ``init`` is not given, for anchor frames clicked in one view: the body parts
+        turned to their other depth and the pose prior (:func:`initialize.initialize`).
 
     Returns
     -------
@@ -322,7 +326,7 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
         from .initialize import initialize
 
         res = initialize(inside, {v: cameras[v] for v in views}, template=template,
-                         calibrated=True, views=views, flips=flips)
+                         calibrated=True, views=views, flips=flips, pose_prior=pose_prior)
         for note in res.flip_notes():
             log(note)
         init = Initial(res.body, res.poses, res.cameras, None, list(getattr(res, "warnings", [])))

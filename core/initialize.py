@@ -243,10 +243,12 @@ class PosePrior:
         The body template the angles belong to.
     """
 
-    def __init__(self, angles, dof_names, template="full"):
+    def __init__(self, angles, dof_names, template="full", takes=None):
         self.samples = np.asarray(angles, float)
         self.dof_names = tuple(str(n) for n in dof_names)
         self.template = str(template)
+        self.takes = np.full(len(self.samples), "", dtype=object) if takes is None else \
+            np.asarray(takes, dtype=object)
         spread = self.samples.std(axis=0)
         self.bandwidth = np.maximum(PRIOR_BANDWIDTH * spread,
                                     np.radians(PRIOR_MIN_BANDWIDTH_DEG))
@@ -282,7 +284,49 @@ class PosePrior:
         if not keep.any():
             raise ZoopraxisError(f"{path}: no poses left after leaving out "
                                  f"{', '.join(exclude)}")
-        return cls(angles[keep], names, template)
+        if angles.ndim != 2 or angles.shape != (len(takes), len(names)):
+            raise ZoopraxisError(f"{path}: not a pose prior file (angles of shape "
+                                 f"{angles.shape} for {len(takes)} poses of {len(names)} DOFs)")
+        return cls(angles[keep], names, template, takes[keep])
+
+    def save(self, path):
+        """Write the prior's poses to ``path`` (``.npz``), as :meth:`load` reads them."""
+        path = Path(path)
+        try:
+            with open(path, "wb") as stream:
+                np.savez_compressed(stream, angles=self.samples.astype(np.float32),
+                                    takes=np.array([str(t) for t in self.takes]),
+                                    dof_names=np.array(self.dof_names),
+                                    template=np.array(self.template))
+        except OSError as error:
+            raise ZoopraxisError(f"{path}: cannot write ({error.strerror})") from None
+
+    @classmethod
+    def from_takes(cls, takes, template="full"):
+        """A prior of the poses of captured or tracked takes, and of their mirror images.
+
+        Parameters
+        ----------
+        takes : dict of str to array, shape (F, n_dofs)
+            Joint angles per take (:func:`take_angles`), keyed by the take's name.
+        template : str
+
+        Raises
+        ------
+        ZoopraxisError
+            No poses at all.
+        """
+        kin = _kinematics(template)
+        names = kin.structure.dof_names
+        angles, labels = [], []
+        for name, a in takes.items():
+            a = np.asarray(a, float).reshape(-1, len(names))
+            # A left-right mirrored pose is as natural as the pose (and one view confuses them).
+            angles += [a, mirror_angles(names, a)]
+            labels += [name] * (2 * len(a))
+        if not labels:
+            raise ZoopraxisError("no poses to learn a pose prior from")
+        return cls(np.concatenate(angles), names, template, labels)
 
     def with_broad(self, mean, sigma, weight=PRIOR_BROAD_WEIGHT):
         """The same prior mixed with a broad Gaussian of everyday poses (weight ``weight``):
@@ -391,6 +435,48 @@ def _fit_mixture(x, n_components, floor_var, iterations=60):
         d = x[:, None] - means[None]
         covs = np.einsum("nk,nki,nkj->kij", r, d, d) / n[:, None, None] + np.diag(floor_var)
     return weights, means, covs
+
+
+# A frame of a take whose fitted joints miss the take's by more than this (RMS, metres) is
+# fitted again from the rest pose; one that still misses by TAKE_DROP_M is left out of a prior.
+TAKE_REFIT_M = 0.015
+TAKE_DROP_M = 0.03
+
+
+def take_angles(joints3d, template="full", step=1):
+    """Joint angles of a take's 3D joints, for :meth:`PosePrior.from_takes`: the template's
+    lengths measured on the joints, then each frame's pose fitted (``fit3d.fit_sequence``,
+    each frame from the one before). A frame that fit misses (a jump between frames far apart,
+    or poses gathered from anywhere) is fitted again from the rest pose, and left out if that
+    misses too (TAKE_REFIT_M, TAKE_DROP_M).
+
+    Parameters
+    ----------
+    joints3d : array, shape (F, 17, 3)
+        World metres; frames with a missing joint (NaN) are left out.
+    step : int
+        Every ``step``-th frame.
+
+    Returns
+    -------
+    angles : array, shape (F', n_dofs)
+    rms : array, shape (F',)
+        Each fitted frame's joint RMS error, metres.
+    """
+    from .fit3d import fit_pose, fit_sequence
+
+    X = np.asarray(joints3d, float)[::max(1, int(step))]
+    X = X[np.isfinite(X).all(axis=(1, 2))]
+    if not len(X):
+        return np.zeros((0, _kinematics(template).n_dofs)), np.zeros(0)
+    body, poses, rms = fit_sequence(X, template)
+    angles = np.array([p.angles for p in poses])
+    for f in np.flatnonzero(rms > TAKE_REFIT_M):
+        pose, e = fit_pose(body, X[f], prior=1e-3)
+        if e < rms[f]:
+            angles[f], rms[f] = pose.angles, e
+    keep = rms <= TAKE_DROP_M
+    return angles[keep], rms[keep]
 
 
 _POSE_PRIORS = {}
@@ -1306,11 +1392,12 @@ def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None,
         Fit the lengths (shared by all anchors); otherwise keep ``dims``.
     views : list of str, optional
         The views to use; default all views of ``cameras`` (calibrated) or with clicks.
-    pose_prior : PosePrior, "default" or None
+    pose_prior : PosePrior, "default", path or None
         In frames clicked in one view, chooses the depth sign of each limb (the mirror
         ambiguity) and, uncalibrated, is the angle prior of the fit (weight PRIOR_WEIGHT):
         the shipped prior learned from motion capture (``"default"``, if there is one for the
-        template), a given one, or none (then the angle prior of everyday poses alone
+        template), a given one or the file of one (``zoopraxis prior``: learned from takes of
+        the kind of motion at hand), or none (then the angle prior of everyday poses alone
         decides).
     flips : dict of int to list of str, optional
         Per anchor frame clicked in one view, body parts (``FLIP_PARTS``: "left arm", ...,
@@ -1378,15 +1465,50 @@ def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None,
             down, spread = check_camera_tilt(camera_tilt)
             # A camera looking down sees the body's up axis turned away from it.
             fit.tilt = (-np.sin(np.radians(down)), np.sin(np.radians(spread)))
-    if isinstance(pose_prior, str) and pose_prior == "default":
-        pose_prior = default_pose_prior(template)
-    if pose_prior is not None and tuple(pose_prior.dof_names) != tuple(kin.structure.dof_names):
-        raise ZoopraxisError(f"the pose prior was learned on the '{pose_prior.template}' body, "
-                             f"not on '{template}'")
+    pose_prior = resolve_pose_prior(pose_prior, template)
     fit.prior = None if pose_prior is None else \
         pose_prior.with_broad(kin.prior_mean, kin.prior_sigma)
     fit.flips = flips
     return fit.run()
+
+
+def resolve_pose_prior(pose_prior, template):
+    """``initialize``'s ``pose_prior`` as a PosePrior or None: ``"default"`` is the shipped
+    prior of the template (None if there is none), a path is read from its file.
+
+    Raises
+    ------
+    ZoopraxisError
+        An unreadable file, or a prior learned on another template (naming the file).
+    """
+    if isinstance(pose_prior, str) and pose_prior == "default":
+        return default_pose_prior(template)
+    where = ""
+    if isinstance(pose_prior, (str, Path)):
+        path = Path(pose_prior)
+        if not path.is_file():
+            raise ZoopraxisError(f"{path}: no such pose prior file")
+        where = f"{path}: "
+        pose_prior = _load_prior_file(path)
+    if pose_prior is not None and (pose_prior.template != template or tuple(
+            pose_prior.dof_names) != tuple(_kinematics(template).structure.dof_names)):
+        raise ZoopraxisError(f"{where}the pose prior was learned on the "
+                             f"'{pose_prior.template}' body, not on '{template}'")
+    return pose_prior
+
+
+_PRIOR_FILES = {}
+
+
+def _load_prior_file(path):
+    """A prior file's PosePrior, read once per file version (re-initializations of a track
+    share it, and its mixture)."""
+    stat = path.stat()
+    key = (str(path.resolve()), stat.st_mtime_ns, stat.st_size)
+    if key not in _PRIOR_FILES:
+        _PRIOR_FILES.clear()
+        _PRIOR_FILES[key] = PosePrior.load(path)
+    return _PRIOR_FILES[key]
 
 
 def check_camera_tilt(camera_tilt, what=None):
@@ -2438,6 +2560,7 @@ def refine_dims(body, poses_by_frame, observations, cameras, *, weights=None, fi
 
 
 __all__ = ["initialize", "InitResult", "PosePrior", "default_pose_prior", "mirror_angles",
+           "take_angles", "resolve_pose_prior",
            "init_from_json", "refine_dims", "RefineResult",
            "triangulate", "similarity_from_points", "procrustes_mpjpe", "LR_PAIRS",
            "LOSS_SCALE_PX", "DIMS_RANGE"]

@@ -658,7 +658,8 @@ def _run_in_processes(run, jobs, workers, progress, cancel, then=None):
 
 def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template="full",
           settings=None, init=None, max_size=960, progress=None, cancel=None, log=None,
-          workers=1, blend_reach=BLEND_REACH, flips=None, camera_tilt=CAMERA_TILT_DEG):
+          workers=1, blend_reach=BLEND_REACH, flips=None, camera_tilt=CAMERA_TILT_DEG,
+          pose_prior="default"):
     """Track a take with the differential tracker.
 
     Parameters
@@ -691,6 +692,9 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
         Uncalibrated, when ``init`` is not given: how far the camera of an anchor frame
         clicked in one view looks down at the subject, give or take how much (degrees;
         :func:`initialize.initialize`).
+    pose_prior : PosePrior, "default", path or None
+        When ``init`` is not given: the pose prior of anchor frames clicked in one view
+        (:func:`initialize.initialize`).
 
     Returns
     -------
@@ -707,7 +711,7 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
         res = initialize(inside, {v: cameras[v] if calibrated else tuple(plates[v].image_size)
                                   for v in views},
                          template=template, calibrated=calibrated, views=views, flips=flips,
-                         camera_tilt=camera_tilt)
+                         camera_tilt=camera_tilt, pose_prior=pose_prior)
         for note in res.flip_notes():
             log(note)
         init = Initial(res.body, res.poses, res.cameras, getattr(res, "view_cameras", None),

@@ -6,7 +6,7 @@
 This is how ``core/data/pose_prior.npz`` is built; run it again to rebuild it. Steps:
 
 1. read each capture at 30 fps and take its 17 standard joints (``core.bvh``);
-2. fit the ``full`` body to every ``step``-th frame (``fit3d.fit_sequence``: the lengths
+2. fit the ``full`` body to every ``step``-th frame (``initialize.take_angles``: the lengths
    measured on the joints, then each frame's root and angles);
 3. keep the joint angles of every frame and their mirror image (left and right swapped), each
    labelled with its take, so that a benchmark can leave a take out
@@ -24,8 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from zoopraxis.core import bvh, fit3d
-from zoopraxis.core.initialize import DEFAULT_POSE_PRIOR, mirror_angles
+from zoopraxis.core import bvh
+from zoopraxis.core.initialize import DEFAULT_POSE_PRIOR, PosePrior, take_angles
 
 REPO = Path(__file__).resolve().parents[1]
 FPS = 30.0
@@ -42,26 +42,19 @@ def main(argv=None):
     if args.out.exists() and not args.force:
         sys.exit(f"learn_pose_prior: {args.out} exists (use --force to replace it)")
 
-    angles, takes, names = [], [], None
+    angles = {}
     for name in args.takes:
         path = args.data / f"{name}.bvh"
         if not path.is_file():
             sys.exit(f"learn_pose_prior: {path}: no such capture")
-        joints = bvh.standard_joints(bvh.load_cmu(path, fps=FPS))[::args.step]
-        body, poses, rms = fit3d.fit_sequence(joints, "full")
-        names = body.dof_names
-        a = np.array([p.angles for p in poses])
-        a = np.concatenate([a, mirror_angles(names, a)])
-        angles.append(a)
-        takes += [name] * len(a)
-        print(f"{name}: {len(poses)} frames fitted, median joint RMS "
+        joints = bvh.standard_joints(bvh.load_cmu(path, fps=FPS))
+        angles[name], rms = take_angles(joints, "full", args.step)
+        print(f"{name}: {len(rms)} frames fitted, median joint RMS "
               f"{1000 * np.median(rms):.1f} mm", flush=True)
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    np.savez_compressed(args.out, angles=np.concatenate(angles).astype(np.float32),
-                        takes=np.array(takes), dof_names=np.array(names),
-                        template=np.array("full"))
-    print(f"{sum(len(a) for a in angles)} poses (with mirrors) -> {args.out}")
-
+    prior = PosePrior.from_takes(angles, "full")
+    prior.save(args.out)
+    print(f"{len(prior.samples)} poses (with mirrors) -> {args.out}")
 
 if __name__ == "__main__":
     main()
