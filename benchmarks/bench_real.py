@@ -2,14 +2,17 @@
 
 The markers in benchmarks/real/walk_markers.json were placed once on frame 80, by eye, as an
 animator would. The walker crosses the view from right to left in frames 80-175. Prints a
-table (frames, status counts, silhouette fit, frames per second) and writes a contact sheet of
-the fitted body over the plate to benchmarks/output/real_walk_sheet.png.
+table (frames, status counts, silhouette fit, frames per second) with the shipped pose prior
+and with one learned from CMU walks (``zoopraxis prior``; it decides the depth of the limbs at
+the one-view anchor), and writes a contact sheet of the fitted body (shipped prior) over the
+plate to benchmarks/output/real_walk_sheet.png.
 
     .venv/bin/python benchmarks/bench_real.py
 """
 
 import os
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -40,24 +43,48 @@ def _ranges(frames):
     return ", ".join(out) or "none"
 
 
+def walking_prior(folder):
+    """The pose prior file ``zoopraxis prior`` writes from subject 131's walks (131_01-03),
+    for frames clicked in one view: what an animator with a library of walks would use."""
+    from zoopraxis.core import bvh
+    from zoopraxis.core.initialize import PosePrior, take_angles
+
+    takes = {}
+    for name in ("131_01", "131_02", "131_03"):
+        joints = bvh.standard_joints(bvh.load_cmu(DATA / "cmu_mocap" / f"{name}.bvh", fps=30))
+        takes[name] = take_angles(joints, step=4)[0]
+    path = Path(folder) / "walks.npz"
+    PosePrior.from_takes(takes).save(path)
+    return path
+
+
 def main():
     video = DATA / "sports2d" / "walk_and_jumps.mp4"
     if not video.is_file():
         sys.exit(f"no footage at {video} (set ZOOPRAXIS_SHARED_DATA)")
     plate = plates.open_plate(video, name="cam0")
     anchors = markers.read_markers(HERE / "real" / "walk_markers.json")
-    t0 = time.perf_counter()
-    result = track({"cam0": plate}, anchors, None, frames=FRAMES, log=print)
-    elapsed = time.perf_counter() - t0
-    fit = np.array(result.extra["silhouette_fit"])[:, 0]
-    for status in ("lost", "uncertain"):
-        frames = [int(f) for f, s in zip(result.frames, result.status) if s == status]
-        print(f"{status}: {_ranges(frames)}")
-    fit = fit[fit >= 0]
-    print(f"{'footage':<16}{'frames':>7}{'ok':>5}{'uncert':>7}{'lost':>5}{'fit':>6}{'fps':>6}")
-    print(f"{'walk side-on':<16}{result.num_frames:>7}{result.status.count('ok'):>5}"
-          f"{result.status.count('uncertain'):>7}{result.status.count('lost'):>5}"
-          f"{fit.mean():>6.2f}{result.num_frames / elapsed:>6.1f}")
+    rows = []
+    folder = tempfile.TemporaryDirectory()
+    for label, prior in (("walk side-on", "default"),
+                         ("+ prior of walks", walking_prior(folder.name))):
+        t0 = time.perf_counter()
+        run = track({"cam0": plate}, anchors, None, frames=FRAMES, log=print,
+                    pose_prior=prior)
+        elapsed = time.perf_counter() - t0
+        fit = np.array(run.extra["silhouette_fit"])[:, 0]
+        print(f"{label}:")
+        for status in ("lost", "uncertain"):
+            frames = [int(f) for f, s in zip(run.frames, run.status) if s == status]
+            print(f"  {status}: {_ranges(frames)}")
+        fit = fit[fit >= 0]
+        rows.append(f"{label:<18}{run.num_frames:>7}{run.status.count('ok'):>5}"
+                    f"{run.status.count('uncertain'):>7}{run.status.count('lost'):>5}"
+                    f"{fit.mean():>6.2f}{run.num_frames / elapsed:>6.1f}")
+        if prior == "default":
+            result = run
+    print(f"{'footage':<18}{'frames':>7}{'ok':>5}{'uncert':>7}{'lost':>5}{'fit':>6}{'fps':>6}")
+    print("\n".join(rows))
     out = HERE / "output"
     out.mkdir(exist_ok=True)
     sheet = contact_sheet({"cam0": plate}, result, frames=list(FRAMES)[::8], columns=6,
