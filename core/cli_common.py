@@ -125,6 +125,16 @@ def add_output_arguments(parser, what):
     parser.add_argument("--force", action="store_true", help="replace an existing --out file")
 
 
+def check_template(name):
+    """``--template``: a body template's name, else a one-line error listing them."""
+    from .body import TEMPLATES
+
+    if name not in TEMPLATES:
+        raise ZoopraxisError(f"--template: unknown body template '{name}' (expected one of "
+                             f"{', '.join(TEMPLATES)})")
+    return name
+
+
 def check_output(path, force):
     """The output path as a Path; refuses to replace an existing file without --force."""
     from pathlib import Path

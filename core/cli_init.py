@@ -5,8 +5,8 @@ import json
 import sys
 
 from .cli_common import (add_camera_tilt_argument, add_output_arguments,
-                         add_pose_prior_arguments, check_output, parse_camera_tilt, parse_flips,
-                         parse_pose_prior)
+                         add_pose_prior_arguments, check_output, check_template,
+                         parse_camera_tilt, parse_flips, parse_pose_prior)
 from .errors import ZoopraxisError
 
 
@@ -36,7 +36,7 @@ def build_parser():
 
 
 def main(argv):
-    from .body import LENGTH_DIMS, TEMPLATES
+    from .body import LENGTH_DIMS
     from .calibfile import check_views, read_calibration
     from .cli_calibrate import parse_plate_options
     from .cli_common import open_plates
@@ -45,9 +45,7 @@ def main(argv):
 
     args = build_parser().parse_args(argv)
     out = check_output(args.out, args.force)
-    if args.template not in TEMPLATES:
-        raise ZoopraxisError(f"--template: unknown body template '{args.template}' (expected "
-                             f"one of {', '.join(TEMPLATES)})")
+    check_template(args.template)
     flips = parse_flips(args.flip)
     camera_tilt = parse_camera_tilt(args.camera_tilt)
     pose_prior = parse_pose_prior(args, args.template)

@@ -12,7 +12,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from .cli_common import check_output
+from .cli_common import check_output, check_template
 from .errors import ZoopraxisError
 
 
@@ -80,14 +80,11 @@ def read_take_joints(path):
 def main(argv):
     import numpy as np
 
-    from .body import TEMPLATES
     from .initialize import PosePrior, take_angles
 
     args = build_parser().parse_args(argv)
     out = check_output(args.out, args.force)
-    if args.template not in TEMPLATES:
-        raise ZoopraxisError(f"--template: unknown body template '{args.template}' (expected "
-                             f"one of {', '.join(TEMPLATES)})")
+    check_template(args.template)
     if args.step < 1:
         raise ZoopraxisError(f"--step {args.step}: give 1 or more")
     paths = [Path(t) for t in args.takes]

@@ -20,6 +20,18 @@ def load_sample(views=("cam0", "cam1", "cam2")):
     return bpy.context.scene.zoopraxis
 
 
+def remembered_initialization(context):
+    """The initialization the add-on remembers for the scene's take as it is now, or None
+    (none made, or made for other markers, cameras or one-view settings)."""
+    from zoopraxis.addon import pipeline
+
+    take = pipeline.gather(context)
+    try:
+        return pipeline.initial_for(context.scene, take)
+    finally:
+        take.close()
+
+
 def scene_state():
     scene = bpy.context.scene
     return (len(bpy.data.objects), len(bpy.data.movieclips), len(bpy.data.actions),
@@ -495,13 +507,10 @@ def test_one_view_camera_tilt_from_the_panel(blender):
     remembered fit is stale and the new one looks at least 3 degrees further down (about 5:
     the prior is a give-or-take-10 one, and this close view's clicks hold the fit near
     level)."""
-    from zoopraxis.addon import pipeline
     from zoopraxis.addon.panels import _draw_init_notes
 
     def lean():
-        take = pipeline.gather(blender)
-        init = pipeline.initial_for(blender.scene, take)
-        take.close()
+        init = remembered_initialization(blender)
         if init is None:
             return None
         R = init.cameras["cam0"].R
@@ -538,7 +547,6 @@ def test_pose_prior_file_from_the_panel(blender, tmp_path):
     missing file is refused in one line."""
     import json
 
-    from zoopraxis.addon import pipeline
     from zoopraxis.core import initialize as init
 
     truth = json.loads((SAMPLE / "truth.json").read_text())
@@ -548,9 +556,7 @@ def test_pose_prior_file_from_the_panel(blender, tmp_path):
     init.PosePrior.from_takes({"walk3": angles}).save(prior)
 
     def error_at_47():
-        take = pipeline.gather(blender)
-        fitted = pipeline.initial_for(blender.scene, take)
-        take.close()
+        fitted = remembered_initialization(blender)
         if fitted is None:
             return None
         return 1000 * init.procrustes_mpjpe(fitted.body.joints(fitted.poses[47]), X)
