@@ -46,15 +46,12 @@ def _ranges(frames):
 def walking_prior(folder):
     """The pose prior file ``zoopraxis prior`` writes from subject 131's walks (131_01-03),
     for frames clicked in one view: what an animator with a library of walks would use."""
-    from zoopraxis.core import bvh
-    from zoopraxis.core.initialize import PosePrior, take_angles
+    from zoopraxis import cli
 
-    takes = {}
-    for name in ("131_01", "131_02", "131_03"):
-        joints = bvh.standard_joints(bvh.load_cmu(DATA / "cmu_mocap" / f"{name}.bvh", fps=30))
-        takes[name] = take_angles(joints, step=4)[0]
     path = Path(folder) / "walks.npz"
-    PosePrior.from_takes(takes).save(path)
+    takes = [str(DATA / "cmu_mocap" / f"{name}.bvh") for name in ("131_01", "131_02", "131_03")]
+    if cli.main(["prior", *takes, "--out", str(path)]) != 0:
+        sys.exit("zoopraxis prior failed (see above)")
     return path
 
 
@@ -65,24 +62,24 @@ def main():
     plate = plates.open_plate(video, name="cam0")
     anchors = markers.read_markers(HERE / "real" / "walk_markers.json")
     rows = []
-    folder = tempfile.TemporaryDirectory()
-    for label, prior in (("walk side-on", "default"),
-                         ("+ prior of walks", walking_prior(folder.name))):
-        t0 = time.perf_counter()
-        run = track({"cam0": plate}, anchors, None, frames=FRAMES, log=print,
-                    pose_prior=prior)
-        elapsed = time.perf_counter() - t0
-        fit = np.array(run.extra["silhouette_fit"])[:, 0]
-        print(f"{label}:")
-        for status in ("lost", "uncertain"):
-            frames = [int(f) for f, s in zip(run.frames, run.status) if s == status]
-            print(f"  {status}: {_ranges(frames)}")
-        fit = fit[fit >= 0]
-        rows.append(f"{label:<18}{run.num_frames:>7}{run.status.count('ok'):>5}"
-                    f"{run.status.count('uncertain'):>7}{run.status.count('lost'):>5}"
-                    f"{fit.mean():>6.2f}{run.num_frames / elapsed:>6.1f}")
-        if prior == "default":
-            result = run
+    with tempfile.TemporaryDirectory() as folder:
+        for label, prior in (("walk side-on", "default"),
+                             ("+ prior of walks", walking_prior(folder))):
+            t0 = time.perf_counter()
+            run = track({"cam0": plate}, anchors, None, frames=FRAMES, log=print,
+                        pose_prior=prior)
+            elapsed = time.perf_counter() - t0
+            fit = np.array(run.extra["silhouette_fit"])[:, 0]
+            print(f"{label}:")
+            for status in ("lost", "uncertain"):
+                frames = [int(f) for f, s in zip(run.frames, run.status) if s == status]
+                print(f"  {status}: {_ranges(frames)}")
+            fit = fit[fit >= 0]
+            rows.append(f"{label:<18}{run.num_frames:>7}{run.status.count('ok'):>5}"
+                        f"{run.status.count('uncertain'):>7}{run.status.count('lost'):>5}"
+                        f"{fit.mean():>6.2f}{run.num_frames / elapsed:>6.1f}")
+            if prior == "default":
+                result = run
     print(f"{'footage':<18}{'frames':>7}{'ok':>5}{'uncert':>7}{'lost':>5}{'fit':>6}{'fps':>6}")
     print("\n".join(rows))
     out = HERE / "output"

@@ -7,7 +7,8 @@ This is how ``core/data/pose_prior.npz`` is built; run it again to rebuild it. S
 
 1. read each capture at 30 fps and take its 17 standard joints (``core.bvh``);
 2. fit the ``full`` body to every ``step``-th frame (``initialize.take_angles``: the lengths
-   measured on the joints, then each frame's root and angles);
+   measured on the joints, then each frame's root and angles), as ``zoopraxis prior`` does
+   (this script runs it on the shipped takes);
 3. keep the joint angles of every frame and their mirror image (left and right swapped), each
    labelled with its take, so that a benchmark can leave a take out
    (``initialize.PosePrior.load(..., exclude=...)``).
@@ -22,13 +23,10 @@ import argparse
 import sys
 from pathlib import Path
 
-import numpy as np
-
-from zoopraxis.core import bvh
-from zoopraxis.core.initialize import DEFAULT_POSE_PRIOR, PosePrior, take_angles
+from zoopraxis import cli
+from zoopraxis.core.initialize import DEFAULT_POSE_PRIOR
 
 REPO = Path(__file__).resolve().parents[1]
-FPS = 30.0
 
 
 def main(argv=None):
@@ -39,22 +37,12 @@ def main(argv=None):
     parser.add_argument("--out", type=Path, default=DEFAULT_POSE_PRIOR)
     parser.add_argument("--force", action="store_true", help="replace an existing output")
     args = parser.parse_args(argv)
-    if args.out.exists() and not args.force:
-        sys.exit(f"learn_pose_prior: {args.out} exists (use --force to replace it)")
-
-    angles = {}
-    for name in args.takes:
-        path = args.data / f"{name}.bvh"
-        if not path.is_file():
-            sys.exit(f"learn_pose_prior: {path}: no such capture")
-        joints = bvh.standard_joints(bvh.load_cmu(path, fps=FPS))
-        angles[name], rms = take_angles(joints, "full", args.step)
-        print(f"{name}: {len(rms)} frames fitted, median joint RMS "
-              f"{1000 * np.median(rms):.1f} mm", flush=True)
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    prior = PosePrior.from_takes(angles, "full")
-    prior.save(args.out)
-    print(f"{len(prior.samples)} poses (with mirrors) -> {args.out}")
+    # the same work as ``zoopraxis prior`` (core/cli_prior.py), which names takes by file stem
+    command = ["prior", *(str(args.data / f"{name}.bvh") for name in args.takes),
+               "--step", str(args.step), "--out", str(args.out)] + ["--force"] * args.force
+    return cli.main(command)
+
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())
