@@ -134,11 +134,17 @@ def gather(context, *, need_markers=True):
     import bpy
 
     pose_prior = bpy.path.abspath(settings.pose_prior_path) if settings.pose_prior_path else ""
-    if pose_prior and not os.path.isfile(pose_prior):
-        for plate in plates.values():
-            plate.close()
-        raise ZoopraxisError(f"pose prior {pose_prior}: no such file (clear the field for the "
-                             "shipped prior)")
+    if pose_prior:
+        # Read now (once per file version), so that a missing file or a prior of another
+        # template is refused before any job starts.
+        try:
+            _import("initialize", "Initialization").resolve_pose_prior(
+                pose_prior, settings.template.lower())
+        except ZoopraxisError as ex:
+            for plate in plates.values():
+                plate.close()
+            raise ZoopraxisError(f"Pose Prior: {ex} (clear the field for the shipped "
+                                 "prior)") from None
     anchor_frames = {a.frame for a in anchors}
     flips = {f: p for f, p in parse_flips(settings.depth_flips).items() if f in anchor_frames}
     return Take(plates, paths, offsets, anchors, cameras, frames, settings.template.lower(),

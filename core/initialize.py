@@ -195,6 +195,12 @@ PRIOR_MIN_BANDWIDTH_DEG = 4.0
 PRIOR_WEIGHT = 1.0
 # Gaussians per body part of the mixture that stands for the density in least squares.
 PRIOR_COMPONENTS = 8
+# A frame seen in one view is also searched from the prior's own poses whose projection best
+# matches the clicks (each under its best scaled orthographic camera): this many of them, that
+# differ by at least EXEMPLAR_APART_DEG in some angle, out of at most EXEMPLAR_POOL poses.
+EXEMPLAR_STARTS = 2
+EXEMPLAR_APART_DEG = 20.0
+EXEMPLAR_POOL = 4000
 # A camera that alone sees an anchor frame, uncalibrated, is taken to look at the upright body
 # from about level: its line of sight this many degrees below the body's horizontal, give or
 # take the second number (a camera's pitch and the pelvis's own lean together; CMU walks lean
@@ -2313,13 +2319,15 @@ class _UncalibratedFit(_Fit):
         frame = self.frames[f]
         parts = list(self.ambiguous_parts.get(frame, []))
         found = []
-        for in_fit in (True, False):
+        searches = [(True, None), (False, None)] + [(True, s) for s in self._exemplars(f)]
+        for in_fit, start in searches:
             self._prior_in_fit, self.ambiguous = in_fit, ambiguous
+            self._start = start
             self.ambiguous_parts[frame] = list(parts)
             try:
                 state = super()._frame(f)
             finally:
-                self._prior_in_fit = True
+                self._prior_in_fit, self._start = True, None
             if not in_fit:
                 state, _, _ = _fit(self.kin, self.obs[f:f + 1], self.weights[f:f + 1], state,
                                    **self.options(state, f, fit_dims=self.fit_dims))
@@ -2334,9 +2342,67 @@ class _UncalibratedFit(_Fit):
             self.ambiguous_parts.pop(frame, None)
         return state
 
+    _start = None       # a start of _frame's search other than the body turns
+
     def start(self, f):
         """Best single-view fit over body turns, then each other view's camera alone."""
+        if self._start is not None:
+            return self._start.copy()
         return self._starts(f, 2)[0]
+
+    def _exemplars(self, f):
+        """Starts for a frame seen in one view from the learned prior's own poses: the
+        EXEMPLAR_STARTS poses (at the starting lengths) whose joints, under the scaled
+        orthographic camera nearest to their best affine camera, fall nearest to the clicks
+        (robust cost), apart from each other by EXEMPLAR_APART_DEG in some angle.
+
+        The body turns and the limbs' depth signs reach the poses near the everyday mean; a
+        pose of the captures far from it (a deep lunge, an arm across the body) is found from
+        the nearest captured pose instead.
+        """
+        if EXEMPLAR_STARTS <= 0 or len(self.prior.samples) == 0:
+            return []
+        v = int(np.flatnonzero(self.usable[f])[0])
+        uv = self.obs[f, v]
+        seen = np.isfinite(uv).all(axis=-1) & (self.weights[f, v] > 0)
+        samples = self.prior.samples
+        if len(samples) > EXEMPLAR_POOL:
+            samples = samples[np.linspace(0, len(samples) - 1, EXEMPLAR_POOL).astype(int)]
+        Y = np.concatenate([self.kin.forward(chunk, self.dims0)[0][:, seen]
+                            for chunk in np.array_split(samples, -(-len(samples) // 500))])
+        Yc = Y - Y.mean(axis=1, keepdims=True)                                # (N, m, 3)
+        target = uv[seen] - uv[seen].mean(axis=0)                              # (m, 2)
+        # The best affine camera of each pose, then the scaled rotation nearest to it.
+        G = np.swapaxes(Yc, 1, 2) @ Yc + 1e-9 * np.eye(3)
+        A = np.swapaxes(np.linalg.solve(G, np.swapaxes(Yc, 1, 2) @ target), 1, 2)  # (N, 2, 3)
+        U, S, Vt = np.linalg.svd(A, full_matrices=False)
+        rows = U @ Vt                                                          # (N, 2, 3)
+        scale = S.mean(axis=1)
+        err = np.linalg.norm(scale[:, None, None] * (Yc @ np.swapaxes(rows, 1, 2)) - target,
+                             axis=-1)
+        c = LOSS_SCALE_PX
+        cost = np.sum(c**2 * (np.sqrt(1.0 + err**2 / c**2) - 1.0), axis=1)
+        picked = []
+        for _ in range(EXEMPLAR_STARTS):
+            if not np.isfinite(cost).any():
+                break
+            i = int(np.argmin(cost))
+            picked.append(i)
+            near = np.abs(samples - samples[i]).max(axis=1) < np.radians(EXEMPLAR_APART_DEG)
+            cost = np.where(near, np.inf, cost)
+        size = self.sizes[v]
+        centre = ((size[0] - 1) / 2, (size[1] - 1) / 2)
+        starts = []
+        for i in picked:
+            R = np.vstack([rows[i], np.cross(rows[i][0], rows[i][1])])
+            Yi = self.kin.forward(samples[i][None], self.dims0)[0][0]
+            shift = (uv[seen].mean(axis=0) - centre) / scale[i] - R[:2] @ Yi[seen].mean(axis=0)
+            cams = [None] * len(self.views)
+            cams[v] = ScaledOrthoCamera(self.views[v], size, float(scale[i]), R=R,
+                                        t=[shift[0], shift[1], 10.0], c=centre)
+            angles = np.clip(samples[i], self.kin.lower, self.kin.upper)
+            starts.append(_State(self.dims0.copy(), 1.0, np.eye(4)[None], angles[None], [cams]))
+        return starts
 
     def _starts(self, f, keep):
         """Single-view fits from the ``keep`` best body turns, best first, each with the other

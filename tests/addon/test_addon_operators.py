@@ -544,7 +544,8 @@ def test_pose_prior_file_from_the_panel(blender, tmp_path):
     from the take itself (its truth, as from an earlier track of the performer) the sample's
     cam2 alone gives a pose nearer the truth at the last anchor than the shipped prior (51 mm
     against 83, Procrustes-aligned); the remembered fit goes stale when the file is set; a
-    missing file is refused in one line."""
+    missing file, or a prior of another body template, is refused in one line before any job
+    starts."""
     import json
 
     from zoopraxis.core import initialize as init
@@ -571,5 +572,10 @@ def test_pose_prior_file_from_the_panel(blender, tmp_path):
     learned = error_at_47()
     assert learned < 0.8 * shipped
     settings.pose_prior_path = str(tmp_path / "gone.npz")
-    with pytest.raises(RuntimeError, match=r"pose prior .*gone\.npz: no such file"):
+    with pytest.raises(RuntimeError, match=r"Pose Prior: .*gone\.npz: no such pose prior file"):
+        bpy.ops.zoopraxis.initialize()
+    settings.pose_prior_path = str(prior)       # the full body's prior, for another body
+    settings.template = "SIDENBLADH"
+    with pytest.raises(RuntimeError, match=r"self\.npz: the pose prior was learned on the "
+                                           r"'full' body, not on 'sidenbladh'"):
         bpy.ops.zoopraxis.initialize()

@@ -416,6 +416,31 @@ def test_take_angles_fits_poses_gathered_from_anywhere(rng):
     angles, rms = init.take_angles(np.array([body.joints(p) for p in poses]))
     assert len(angles) == 30 and rms.max() < init.TAKE_DROP_M and np.median(rms) < 0.01
 
+
+def test_one_view_search_starts_from_the_priors_nearest_poses(monkeypatch):
+    """A frame seen in one view is also searched from the prior's own poses that project
+    nearest to the clicks: with a prior of the performer's take, the sample's last anchor seen
+    by cam0 alone comes within 30 mm of the truth (Procrustes-aligned); searched from the body
+    turns alone, the fit stayed in another basin, 78 mm off."""
+    from zoopraxis.core.calibfile import read_calibration
+    from zoopraxis.core.markers import read_markers
+
+    root = cli.__file__.replace("cli.py", "samples/walk3/")
+    truth = json.loads(open(root + "truth.json").read())
+    X = np.array(truth["joints3d"][truth["frames"].index(47)])
+    angles, _ = init.take_angles(np.array(truth["joints3d"]))
+    prior = init.PosePrior.from_takes({"walk3": angles})
+    clicks = next(a for a in read_markers(root + "markers.json") if a.frame == 47).views["cam0"]
+    size = read_calibration(root + "calibration.json")["cam0"].image_size
+    errors, shipped = {}, init.EXEMPLAR_STARTS
+    for starts in (shipped, 0):
+        monkeypatch.setattr(init, "EXEMPLAR_STARTS", starts)
+        result = init.initialize([Anchor(47, {"cam0": clicks})], {"cam0": size},
+                                 calibrated=False, pose_prior=prior)
+        errors[starts] = 1000 * init.procrustes_mpjpe(result.joints3d(47), X)
+    assert errors[shipped] < 30.0 < 60.0 < errors[0]
+
+
 def test_prior_knows_a_stride_sets_the_legs_apart():
     """The legs share one density: strides of a take the prior never saw are likelier than
     the same strides with the right leg set where the left one is (both legs before the body,
