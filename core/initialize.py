@@ -2368,9 +2368,10 @@ class _UncalibratedFit(_Fit):
         samples = self.prior.samples
         if len(samples) > EXEMPLAR_POOL:
             samples = samples[np.linspace(0, len(samples) - 1, EXEMPLAR_POOL).astype(int)]
-        Y = np.concatenate([self.kin.forward(chunk, self.dims0)[0][:, seen]
+        Y = np.concatenate([self.kin.forward(chunk, self.dims0)[0]
                             for chunk in np.array_split(samples, -(-len(samples) // 500))])
-        Yc = Y - Y.mean(axis=1, keepdims=True)                                # (N, m, 3)
+        Ys = Y[:, seen]                                                        # (N, m, 3)
+        Yc = Ys - Ys.mean(axis=1, keepdims=True)
         target = uv[seen] - uv[seen].mean(axis=0)                              # (m, 2)
         # The best affine camera of each pose, then the scaled rotation nearest to it.
         G = np.swapaxes(Yc, 1, 2) @ Yc + 1e-9 * np.eye(3)
@@ -2395,8 +2396,7 @@ class _UncalibratedFit(_Fit):
         starts = []
         for i in picked:
             R = np.vstack([rows[i], np.cross(rows[i][0], rows[i][1])])
-            Yi = self.kin.forward(samples[i][None], self.dims0)[0][0]
-            shift = (uv[seen].mean(axis=0) - centre) / scale[i] - R[:2] @ Yi[seen].mean(axis=0)
+            shift = (uv[seen].mean(axis=0) - centre) / scale[i] - R[:2] @ Ys[i].mean(axis=0)
             cams = [None] * len(self.views)
             cams[v] = ScaledOrthoCamera(self.views[v], size, float(scale[i]), R=R,
                                         t=[shift[0], shift[1], 10.0], c=centre)
