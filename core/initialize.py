@@ -1034,11 +1034,15 @@ class _Problem:
         return np.where(problem.mask, err, np.nan)
 
 
+def _rho_px(errors, c=LOSS_SCALE_PX):
+    """Soft L1 of click errors (pixels), per error: ``c^2 (sqrt(1 + e^2 / c^2) - 1)``."""
+    return c**2 * (np.sqrt(1.0 + errors**2 / c**2) - 1.0)
+
+
 def _robust_cost(errors, c=LOSS_SCALE_PX):
     """About what click errors (pixels, NaN ignored) add to the fit's cost, ``0.5 sum rho``
     (the fit's soft L1 acts per coordinate; this per-point form is close)."""
-    e = errors[np.isfinite(errors)]
-    return float(np.sum(c**2 * (np.sqrt(1.0 + e**2 / c**2) - 1.0)))
+    return float(np.sum(_rho_px(errors[np.isfinite(errors)], c)))
 
 
 def _fit(kin, obs, weights, state, **options):
@@ -1727,8 +1731,7 @@ class _Fit:
             if cam is None or not seen.any():
                 continue
             err = np.linalg.norm(cam.project(X[:, seen]) - uv[seen], axis=-1)  # (B, m)
-            c = LOSS_SCALE_PX
-            costs += np.sum(c**2 * (np.sqrt(1.0 + err**2 / c**2) - 1.0), axis=1)
+            costs += np.sum(_rho_px(err), axis=1)
         return costs
 
     def _score(self, state, f, angles):
@@ -2343,6 +2346,7 @@ class _UncalibratedFit(_Fit):
         return state
 
     _start = None       # a start of _frame's search other than the body turns
+    _pool = None        # _exemplars' (prior poses, their joints at the starting lengths)
 
     def start(self, f):
         """Best single-view fit over body turns, then each other view's camera alone."""
@@ -2365,11 +2369,14 @@ class _UncalibratedFit(_Fit):
         v = int(np.flatnonzero(self.usable[f])[0])
         uv = self.obs[f, v]
         seen = np.isfinite(uv).all(axis=-1) & (self.weights[f, v] > 0)
-        samples = self.prior.samples
-        if len(samples) > EXEMPLAR_POOL:
-            samples = samples[np.linspace(0, len(samples) - 1, EXEMPLAR_POOL).astype(int)]
-        Y = np.concatenate([self.kin.forward(chunk, self.dims0)[0]
-                            for chunk in np.array_split(samples, -(-len(samples) // 500))])
+        if self._pool is None:      # the prior's poses at the starting lengths, once a fit
+            samples = self.prior.samples
+            if len(samples) > EXEMPLAR_POOL:
+                samples = samples[np.linspace(0, len(samples) - 1, EXEMPLAR_POOL).astype(int)]
+            self._pool = samples, np.concatenate(
+                [self.kin.forward(chunk, self.dims0)[0]
+                 for chunk in np.array_split(samples, -(-len(samples) // 500))])
+        samples, Y = self._pool
         Ys = Y[:, seen]                                                        # (N, m, 3)
         Yc = Ys - Ys.mean(axis=1, keepdims=True)
         target = uv[seen] - uv[seen].mean(axis=0)                              # (m, 2)
@@ -2381,8 +2388,7 @@ class _UncalibratedFit(_Fit):
         scale = S.mean(axis=1)
         err = np.linalg.norm(scale[:, None, None] * (Yc @ np.swapaxes(rows, 1, 2)) - target,
                              axis=-1)
-        c = LOSS_SCALE_PX
-        cost = np.sum(c**2 * (np.sqrt(1.0 + err**2 / c**2) - 1.0), axis=1)
+        cost = np.sum(_rho_px(err), axis=1)
         picked = []
         for _ in range(EXEMPLAR_STARTS):
             if not np.isfinite(cost).any():
