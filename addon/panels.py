@@ -156,6 +156,7 @@ class VIEW3D_PT_zoopraxis(bpy.types.Panel):
         box = _step(layout, "4. Initialize", 'ARMATURE_DATA', missing["initialize"])
         box.prop(settings, "template")
         box.prop(settings, "pose_prior_path")
+        box.prop(settings, "dims_path")
         sub = box.row()
         sub.enabled = missing["initialize"] is None and not settings.running
         sub.operator("zoopraxis.initialize", icon='POSE_HLT')

@@ -68,6 +68,8 @@ class Take:
     flips: dict = None      # anchor frame -> body parts the animator turned in depth
     camera_tilt: float = 0.0    # degrees an uncalibrated one-view camera looks down
     pose_prior: str = ""        # a pose prior file for one-view anchors ("": the shipped one)
+    dims: dict = None           # the performer's lengths, kept (None: fitted to the clicks)
+    dims_path: str = ""         # the file they came from
 
     def prior(self):
         """``pose_prior`` for :func:`core.initialize.initialize`."""
@@ -145,11 +147,23 @@ def gather(context, *, need_markers=True):
                 plate.close()
             raise ZoopraxisError(f"Pose Prior: {ex} (clear the field for the shipped "
                                  "prior)") from None
+    dims_path = bpy.path.abspath(settings.dims_path) if settings.dims_path else ""
+    dims = None
+    if dims_path:
+        try:
+            dims = _import("cli_common", "Initialization").read_dims(
+                dims_path, settings.template.lower())
+        except ZoopraxisError as ex:
+            for plate in plates.values():
+                plate.close()
+            raise ZoopraxisError(f"Body Lengths From: {ex} (clear the field to fit the "
+                                 "lengths)") from None
     anchor_frames = {a.frame for a in anchors}
     flips = {f: p for f, p in parse_flips(settings.depth_flips).items() if f in anchor_frames}
     return Take(plates, paths, offsets, anchors, cameras, frames, settings.template.lower(),
                 settings.tracker.lower(), n, fps, flips=flips or None,
-                camera_tilt=settings.camera_tilt, pose_prior=pose_prior)
+                camera_tilt=settings.camera_tilt, pose_prior=pose_prior, dims=dims,
+                dims_path=dims_path)
 
 
 def parse_flips(text):
@@ -183,7 +197,7 @@ def initialize(take, *, progress=None, cancel=None):
     result = call(module.initialize, inside, cameras, template=take.template,
                   calibrated=take.cameras is not None, views=list(take.plates),
                   flips=take.flips_at(inside), camera_tilt=take.tilt(),
-                  pose_prior=take.prior())
+                  pose_prior=take.prior(), dims=take.dims, fit_dims=not take.dims)
     if progress:
         progress(1, 1)
     return result
@@ -191,7 +205,8 @@ def initialize(take, *, progress=None, cancel=None):
 
 def _fingerprint(take):
     """What an initialization depends on: template, calibration, the anchors' clicks and the
-    animator's choices for one-view anchors (flips, camera tilt, pose prior file)."""
+    animator's choices for one-view anchors (flips, camera tilt, pose prior file) and the
+    body lengths kept from a file."""
     clicks = tuple((a.frame, v, j, round(u, 2), round(w, 2))
                    for a in take.anchors if a.frame in take.frames
                    for v, joints in sorted(a.views.items())
@@ -206,7 +221,8 @@ def _fingerprint(take):
             prior = (take.pose_prior, os.stat(take.pose_prior).st_mtime_ns)
         except OSError:
             prior = (take.pose_prior, None)
-    return take.template, cameras, clicks, flips, tilt, prior
+    dims = None if not take.dims else tuple(sorted(take.dims.items()))
+    return take.template, cameras, clicks, flips, tilt, prior, dims
 
 
 def remember_initial(scene, init, take):
@@ -235,6 +251,8 @@ def track(take, *, init=None, progress=None, cancel=None, log=None):
         options["flips"] = flips
     if init is None and take.pose_prior:
         options["pose_prior"] = take.prior()
+    if init is None and take.dims:
+        options["dims"] = take.dims
     if init is None and take.cameras is None and take.tracker == "differential":
         options["camera_tilt"] = take.tilt()
     if take.tracker == "differential":

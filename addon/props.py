@@ -120,6 +120,12 @@ class ZOOPRAXIS_PG_settings(bpy.types.PropertyGroup):
                     "pose prior: empty for the shipped one, or a prior file learned from "
                     "takes of the motion at hand ('zoopraxis prior'). Used by Initialize and "
                     "Track")
+    dims_path: StringProperty(
+        name="Body Lengths From", subtype='FILE_PATH',
+        description="Keep the body lengths of the same performer fitted before: an init.json "
+                    "or result.json of a shot seen in several views (one view alone sees the "
+                    "lengths poorly). Empty: fit them to the clicks. Used by Initialize and "
+                    "Track")
     depth_flips: StringProperty(
         name="Depth Flips",
         description="FRAME:PART;... turned to their other depth by the animator (used by "

@@ -256,6 +256,47 @@ def cmu_cases(table, rng, n):
                       f"1 frame in {ONE_VIEW_TRIALS}", nats)
 
 
+def known_lengths_cases(table, rng, n):
+    """One view with the performer's lengths known (``init --dims-from``): the CMU frames of
+    the one-view row, each fitted with the lengths (kept fixed) that a three-view calibrated
+    init fitted to three frames of another take of the same performer (131_01 and 131_03 of
+    subject 131 each other's; 01_01, subject 1's only take, three of its frames the row does
+    not judge) with the same click noise."""
+    from zoopraxis.core import bvh, fit3d
+
+    if not CMU.is_dir():
+        return
+    pa, seg, secs = [], [], []
+    for name, other in (("131_01", "131_03"), ("131_03", "131_01"), ("01_01", "01_01")):
+        joints = bvh.standard_joints(bvh.load_cmu(CMU / f"{name}.bvh", fps=30))
+        shoot = bvh.standard_joints(bvh.load_cmu(CMU / f"{other}.bvh", fps=30))
+        picked = np.linspace(0, len(joints) - 1, ONE_VIEW_TRIALS * max(2, n // 2)).astype(int)
+        third = len(shoot) // 3
+        target = shoot[third, JOINT_INDEX["pelvis"]].copy()
+        target[2] = 1.0
+        cams = ring(3, rng, FHD_10M, target)
+        anchors = [Anchor(int(f), clicks(cams, shoot[f], rng))
+                   for f in (7, third + 7, 2 * third + 7)]
+        body = init.initialize(anchors, {c.name: c for c in cams}).body
+        seg.append(100 * segment_error(body, fit3d.dims_from_joints(shoot[::30])))
+        prior = init.PosePrior.load(exclude=[name])
+        for i in picked:
+            X = joints[i]
+            target = X[JOINT_INDEX["pelvis"]].copy()
+            target[2] = 1.0
+            cam = ring(1, rng, FHD_100M, target)
+            t = time.perf_counter()
+            result = init.initialize([Anchor(0, clicks(cam, X, rng))], {cam[0].name: cam[0]},
+                                     calibrated=False, pose_prior=prior, dims=body.dims,
+                                     fit_dims=False)
+            secs.append(time.perf_counter() - t)
+            pa.append(1000 * init.procrustes_mpjpe(result.joints3d(0), X))
+    case = "CMU frames, 1 uncalibrated, 1080p @100m, lengths of a 3-view init"
+    table.add(case, "PA-MPJPE mm (vs CMU joints)", pa)
+    table.add(case, "3-view lengths' segment err %", seg)
+    table.add(case, "time s", secs)
+
+
 def swap_cases(table, rng, n):
     found, clean_false = [], []
     for _ in range(n):
@@ -396,6 +437,8 @@ def main():
     refine_cases(table, rng, 30 if args.quick else 80)
     finetune_cases(table, 10 if args.quick else 20, rng)
     calibration_cases(table, rng)
+    # its own random stream: the rows above draw the same poses and cameras as before it
+    known_lengths_cases(table, np.random.default_rng(args.seed + 1), n)
     print()
     table.print()
 

@@ -152,3 +152,49 @@ def open_plates(paths, fps=None):
     if not paths:
         raise ZoopraxisError("give at least one --plate VIEW=PATH")
     return {name: open_plate(path, name=name, fps=fps) for name, path in paths.items()}
+
+
+def add_dims_argument(parser):
+    """``--dims-from``, read by :func:`read_dims`."""
+    parser.add_argument("--dims-from", default=None, metavar="FILE",
+                        help="keep the body lengths of the same performer fitted before: an "
+                             "init.json or result.json of a shot seen in several views (one "
+                             "view alone sees the lengths poorly)")
+
+
+def read_dims(path, template):
+    """The body lengths of an init.json or result.json, for ``--dims-from``.
+
+    Raises
+    ------
+    ZoopraxisError
+        An unreadable file, one without a body, or a body of another template.
+    """
+    import json
+    from pathlib import Path
+
+    from .body import LENGTH_DIMS
+
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise ZoopraxisError(f"{path}: no such file (--dims-from)") from None
+    except (OSError, ValueError) as error:
+        raise ZoopraxisError(f"{path}: not readable JSON ({error})") from None
+    body = data.get("body") if isinstance(data, dict) and "body" in data else data
+    if not isinstance(data, dict) or data.get("format") not in ("zoopraxis-init/1",
+                                                                "zoopraxis-track/1") \
+            or not isinstance(body, dict) or not isinstance(body.get("dims"), dict):
+        raise ZoopraxisError(f"{path}: not an init.json or result.json with body dimensions")
+    if body.get("template", "full") != template:
+        raise ZoopraxisError(f"{path}: dimensions of the '{body.get('template', 'full')}' "
+                             f"body, not of '{template}' (--template)")
+    try:
+        dims = {name: float(body["dims"][name]) for name in LENGTH_DIMS
+                if name in body["dims"]}
+    except (TypeError, ValueError):
+        raise ZoopraxisError(f"{path}: body dimensions are not numbers") from None
+    if not dims or not all(v > 0 for v in dims.values()):
+        raise ZoopraxisError(f"{path}: no positive body lengths")
+    return dims

@@ -4,9 +4,9 @@ import argparse
 import json
 import sys
 
-from .cli_common import (add_camera_tilt_argument, add_output_arguments,
+from .cli_common import (add_camera_tilt_argument, add_dims_argument, add_output_arguments,
                          add_pose_prior_arguments, check_output, check_template,
-                         parse_camera_tilt, parse_flips, parse_pose_prior)
+                         parse_camera_tilt, parse_flips, parse_pose_prior, read_dims)
 from .errors import ZoopraxisError
 
 
@@ -25,6 +25,7 @@ def build_parser():
                    help="body template: full, muybridge, sidenbladh or yamamoto (full)")
     p.add_argument("--fixed-dims", action="store_true",
                    help="keep the template's body dimensions instead of fitting them")
+    add_dims_argument(p)
     add_pose_prior_arguments(p)
     p.add_argument("--flip", action="append", default=[], metavar="FRAME:PART",
                    help="at an anchor frame clicked in one view, turn a body part to its other "
@@ -52,6 +53,7 @@ def main(argv):
     if args.camera_tilt is not None and args.calibration:
         raise ZoopraxisError("--camera-tilt is for uncalibrated views: the calibration gives "
                              "the cameras' tilt")
+    dims = read_dims(args.dims_from, args.template) if args.dims_from else None
     plates = open_plates(parse_plate_options(args.plate))
     views = list(plates)
     anchors = read_markers(args.markers)
@@ -71,11 +73,13 @@ def main(argv):
           f"{len(views)} view{'s' if len(views) > 1 else ''} ({mode})", file=sys.stderr,
           flush=True)
     result = initialize(anchors, cameras, template=args.template,
-                        calibrated=bool(args.calibration), fit_dims=not args.fixed_dims,
+                        calibrated=bool(args.calibration), dims=dims,
+                        fit_dims=not (args.fixed_dims or dims),
                         views=views, pose_prior=pose_prior,
                         flips=flips, camera_tilt=camera_tilt)
     print("body dimensions (m): " + ", ".join(f"{name} {result.body.dims[name]:.3f}"
-                                             for name in LENGTH_DIMS))
+                                             for name in LENGTH_DIMS)
+          + (f" (kept from {args.dims_from})" if dims else ""))
     print("rms per view (px): " + ", ".join(f"{view} {rms:.2f}"
                                            for view, rms in result.rms.items()))
     for warning in result.warnings:
@@ -95,3 +99,4 @@ def main(argv):
         raise ZoopraxisError(f"{out}: cannot write ({error.strerror})") from None
     print(f"wrote {out}")
     return 0
+

@@ -3,9 +3,9 @@
 import argparse
 import time
 
-from .cli_common import (add_camera_tilt_argument, add_output_arguments,
+from .cli_common import (add_camera_tilt_argument, add_dims_argument, add_output_arguments,
                          add_pose_prior_arguments, check_output, open_plates, parse_camera_tilt,
-                         parse_flips, parse_pose_prior, parse_view_values)
+                         parse_flips, parse_pose_prior, parse_view_values, read_dims)
 from .errors import ZoopraxisError
 from .progress import ConsoleProgress
 
@@ -46,6 +46,7 @@ def build_parser():
                         "repeat for more")
     add_camera_tilt_argument(p)
     add_pose_prior_arguments(p)
+    add_dims_argument(p)
     add_output_arguments(p, "result.json")
     return p
 
@@ -82,9 +83,10 @@ def main(argv):
         raise ZoopraxisError("--camera-tilt is for uncalibrated views: the calibration gives "
                              "the cameras' tilt")
     pose_prior = parse_pose_prior(args, args.template)
+    dims = read_dims(args.dims_from, args.template) if args.dims_from else None
     stop = _StopOnInterrupt()
     kwargs = dict(frames=frames, offsets=offsets, template=args.template, flips=flips,
-                  pose_prior=pose_prior,
+                  pose_prior=pose_prior, dims=dims,
                   max_size=args.max_size, progress=ConsoleProgress("track"), cancel=stop,
                   log=lambda msg: print(f"track: {msg}", flush=True))
     t0 = time.perf_counter()

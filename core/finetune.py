@@ -454,7 +454,7 @@ def _sample_frames(result, n):
 def finetune(plates, anchors, cameras, *, result=None, init=None, frames=None, offsets=None,
              template="full", settings=None, max_size=960, backgrounds=None, samples=12,
              iterations=10, progress=None, cancel=None, log=None, flips=None,
-             pose_prior="default"):
+             pose_prior="default", dims=None):
     """Track, refine the body's lengths on the images of the whole take, track again (§2.7).
 
     Parameters
@@ -486,6 +486,9 @@ def finetune(plates, anchors, cameras, *, result=None, init=None, frames=None, o
     flips, pose_prior : optional
         When ``init`` is not given, for anchor frames clicked in one view: the body parts
         turned to their other depth and the pose prior (:func:`initialize.initialize`).
+    dims : dict, optional
+        When ``init`` is not given: the performer's body lengths, kept instead of fitted to the clicks (the
+        refinement still refines them).
 
     Returns
     -------
@@ -523,7 +526,8 @@ def finetune(plates, anchors, cameras, *, result=None, init=None, frames=None, o
     inside = [a for a in anchors if frames.start <= a.frame < frames.stop]
     if init is None and inside:
         res = initialize(inside, {v: cameras[v] for v in views}, template=template,
-                         calibrated=True, views=views, flips=flips, pose_prior=pose_prior)
+                         calibrated=True, views=views, flips=flips, pose_prior=pose_prior,
+                         dims=dims, fit_dims=not dims)
         for note in res.flip_notes():
             say(note)
         init = T.Initial(res.body, res.poses, res.cameras, None, list(res.warnings))

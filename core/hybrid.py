@@ -226,7 +226,7 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
           frames=None, offsets=None, template="full", max_size=960, progress=None, cancel=None,
           log=None, init=None, settings=None, prior="smooth", recentre=RECENTRE,
           prior_scale=None, layers=None, silhouette=None, blend_reach=BLEND_REACH, flips=None,
-          pose_prior="default"):
+          pose_prior="default", dims=None):
     """Track a take with the particle filter, alone or as the coarse stage of the hybrid.
 
     Parameters
@@ -279,6 +279,8 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
     flips, pose_prior : optional
         When ``init`` is not given, for anchor frames clicked in one view: the body parts
         turned to their other depth and the pose prior (:func:`initialize.initialize`).
+    dims : dict, optional
+        When ``init`` is not given: the performer's body lengths, kept instead of fitted.
 
     Returns
     -------
@@ -326,7 +328,8 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
         from .initialize import initialize
 
         res = initialize(inside, {v: cameras[v] for v in views}, template=template,
-                         calibrated=True, views=views, flips=flips, pose_prior=pose_prior)
+                         calibrated=True, views=views, flips=flips, pose_prior=pose_prior,
+                         dims=dims, fit_dims=not dims)
         for note in res.flip_notes():
             log(note)
         init = Initial(res.body, res.poses, res.cameras, None, list(getattr(res, "warnings", [])))

@@ -659,7 +659,7 @@ def _run_in_processes(run, jobs, workers, progress, cancel, then=None):
 def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template="full",
           settings=None, init=None, max_size=960, progress=None, cancel=None, log=None,
           workers=1, blend_reach=BLEND_REACH, flips=None, camera_tilt=CAMERA_TILT_DEG,
-          pose_prior="default"):
+          pose_prior="default", dims=None):
     """Track a take with the differential tracker.
 
     Parameters
@@ -695,6 +695,8 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
     pose_prior : PosePrior, "default", path or None
         When ``init`` is not given: the pose prior of anchor frames clicked in one view
         (:func:`initialize.initialize`).
+    dims : dict, optional
+        When ``init`` is not given: the performer's body lengths, kept instead of fitted.
 
     Returns
     -------
@@ -711,7 +713,8 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
         res = initialize(inside, {v: cameras[v] if calibrated else tuple(plates[v].image_size)
                                   for v in views},
                          template=template, calibrated=calibrated, views=views, flips=flips,
-                         camera_tilt=camera_tilt, pose_prior=pose_prior)
+                         camera_tilt=camera_tilt, pose_prior=pose_prior, dims=dims,
+                         fit_dims=not dims)
         for note in res.flip_notes():
             log(note)
         init = Initial(res.body, res.poses, res.cameras, getattr(res, "view_cameras", None),

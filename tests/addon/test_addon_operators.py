@@ -579,3 +579,32 @@ def test_pose_prior_file_from_the_panel(blender, tmp_path):
     with pytest.raises(RuntimeError, match=r"self\.npz: the pose prior was learned on the "
                                            r"'full' body, not on 'sidenbladh'"):
         bpy.ops.zoopraxis.initialize()
+
+
+def test_body_lengths_file_from_the_panel(blender, tmp_path):
+    """The Initialize step's "Body Lengths From" file: a one-view initialization keeps the
+    lengths of a three-view init.json of the performer instead of fitting its own; the
+    remembered fit goes stale when the file is set; a missing file is refused in one line."""
+    import json
+
+    from zoopraxis import cli
+    from zoopraxis.core.body import LENGTH_DIMS
+
+    three = tmp_path / "three.json"
+    assert cli.main(["init", "--markers", str(SAMPLE / "markers.json"), "--calibration",
+                     str(SAMPLE / "calibration.json"), "--out", str(three)]
+                    + [f"--plate=cam{i}={SAMPLE / f'cam{i}'}" for i in range(3)]) == 0
+    measured = json.loads(three.read_text())["dims"]
+    settings = load_sample(("cam2",))
+    bpy.ops.zoopraxis.import_markers(filepath=str(SAMPLE / "markers.json"))
+    assert bpy.ops.zoopraxis.initialize() == {'FINISHED'}
+    own = remembered_initialization(blender).body.dims
+    assert any(abs(own[n] - measured[n]) > 1e-3 for n in LENGTH_DIMS)
+    settings.dims_path = str(three)
+    assert remembered_initialization(blender) is None
+    assert bpy.ops.zoopraxis.initialize() == {'FINISHED'}
+    kept = remembered_initialization(blender).body.dims
+    assert all(abs(kept[n] - measured[n]) < 1e-5 for n in LENGTH_DIMS)
+    settings.dims_path = str(tmp_path / "gone.json")
+    with pytest.raises(RuntimeError, match=r"Body Lengths From: .*gone\.json: no such file"):
+        bpy.ops.zoopraxis.initialize()

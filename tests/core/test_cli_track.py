@@ -60,6 +60,7 @@ def test_track_writes_a_result(take, tmp_path):
     (["--workers", "-1"], "--workers -1"),
     (["--flip", "0:tail"], "--flip '0:tail': expected FRAME:PART"),
     (["--flip", "3:left-leg"], "frame 3 is not an anchor frame"),
+    (["--dims-from", "nope.json"], "nope.json: no such file (--dims-from)"),
 ])
 def test_track_bad_input_is_one_line(take, tmp_path, change, message):
     run = zoopraxis(*track_args(take, tmp_path / "r.json", *change))
@@ -79,6 +80,32 @@ def test_track_one_view_with_a_limb_flipped_in_depth(take, tmp_path):
     assert "frame 0: flipped in depth: left leg" in run.stdout or \
         "the left leg lies across the view" in run.stdout
     assert result_io.read_result(out).mode == "uncalibrated"
+
+
+def test_track_one_view_keeps_the_lengths_of_a_calibrated_init(take, tmp_path):
+    """--dims-from: the one-view track's body has the lengths the two calibrated views
+    fitted, not lengths of its own."""
+    init_json = tmp_path / "init.json"
+    run = zoopraxis("init", "--plate", f"cam0={take / 'cam0'}", "--plate",
+                    f"cam1={take / 'cam1'}", "--markers", take / "markers.json",
+                    "--calibration", take / "calibration.json", "--out", init_json)
+    assert run.returncode == 0, run.stderr
+    measured = json.loads(init_json.read_text())["dims"]
+    marks = json.loads((take / "markers.json").read_text())
+    for anchor in marks["anchors"]:
+        anchor["views"] = {"cam0": anchor["views"]["cam0"]}
+    (tmp_path / "markers.json").write_text(json.dumps(marks))
+    lengths = {}
+    for extra in ([], ["--dims-from", init_json]):
+        out = tmp_path / f"result{len(extra)}.json"
+        run = zoopraxis("track", "--plate", f"cam0={take / 'cam0'}", "--markers",
+                        tmp_path / "markers.json", "--frames", "0:3", "--out", out, *extra)
+        assert run.returncode == 0, run.stderr
+        lengths[len(extra)] = result_io.read_result(out).body["dims"]
+    assert all(lengths[2][n] == pytest.approx(measured[n], abs=1e-5)
+               for n in ("thigh", "shank", "upper_arm", "forearm", "torso"))
+    assert any(abs(lengths[0][n] - measured[n]) > 1e-3
+               for n in ("thigh", "shank", "upper_arm", "forearm", "torso"))
 
 
 def test_calibration_missing_a_view(take, tmp_path):

@@ -758,6 +758,43 @@ def test_init_command_writes_init_json(tmp_path, capsys):
     assert "file exists" in capsys.readouterr().err
 
 
+def test_init_command_keeps_the_dims_of_an_earlier_init(tmp_path, capsys):
+    """--dims-from: a one-view init keeps the lengths a three-view init of the performer
+    fitted; a file without them, or of another template, is refused naming it."""
+    root = cli.__file__.replace("cli.py", "samples/walk3/")
+    three = tmp_path / "three.json"
+    args = ["init", "--markers", root + "markers.json", "--calibration",
+            root + "calibration.json", "--out", str(three)]
+    assert cli.main(args + [f"--plate=cam{i}={root}cam{i}" for i in range(3)]) == 0
+    measured = json.loads(three.read_text())["dims"]
+    root, markers, _ = _sample_first_anchor_in_cam0(tmp_path)
+    one = ["init", "--markers", str(markers), f"--plate=cam0={root}cam0"]
+    out = tmp_path / "one.json"
+    assert cli.main(one + ["--out", str(out), "--dims-from", str(three)]) == 0
+    assert f"(kept from {three})" in capsys.readouterr().out
+    kept = json.loads(out.read_text())["dims"]
+    assert all(kept[n] == pytest.approx(measured[n], abs=1e-5) for n in bm.LENGTH_DIMS)
+    fitted = tmp_path / "fitted.json"
+    assert cli.main(one + ["--out", str(fitted)]) == 0
+    assert any(abs(json.loads(fitted.read_text())["dims"][n] - measured[n]) > 1e-3
+               for n in bm.LENGTH_DIMS)
+    capsys.readouterr()
+    bad = tmp_path / "markers_copy.json"
+    bad.write_text(markers.read_text())
+    other = tmp_path / "other.json"
+    data = json.loads(three.read_text())
+    data["template"] = "sidenbladh"
+    other.write_text(json.dumps(data))
+    for path, message in ((tmp_path / "gone.json", "gone.json: no such file"),
+                          (bad, "markers_copy.json: not an init.json or result.json"),
+                          (other, "other.json: dimensions of the 'sidenbladh' body, not of "
+                                  "'full'")):
+        assert cli.main(one + ["--out", str(tmp_path / "x.json"), "--dims-from",
+                               str(path)]) == 2
+        assert message in capsys.readouterr().err
+    assert not (tmp_path / "x.json").exists()
+
+
 def _sample_first_anchor_in_cam0(tmp_path):
     """The sample's plates folder, a markers.json with its first anchor in cam0 alone, and
     that anchor's frame."""
