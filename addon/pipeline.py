@@ -69,7 +69,6 @@ class Take:
     camera_tilt: float = 0.0    # degrees an uncalibrated one-view camera looks down
     pose_prior: str = ""        # a pose prior file for one-view anchors ("": the shipped one)
     dims: dict = None           # the performer's lengths, kept (None: fitted to the clicks)
-    dims_path: str = ""         # the file they came from
 
     def prior(self):
         """``pose_prior`` for :func:`core.initialize.initialize`."""
@@ -162,8 +161,7 @@ def gather(context, *, need_markers=True):
     flips = {f: p for f, p in parse_flips(settings.depth_flips).items() if f in anchor_frames}
     return Take(plates, paths, offsets, anchors, cameras, frames, settings.template.lower(),
                 settings.tracker.lower(), n, fps, flips=flips or None,
-                camera_tilt=settings.camera_tilt, pose_prior=pose_prior, dims=dims,
-                dims_path=dims_path)
+                camera_tilt=settings.camera_tilt, pose_prior=pose_prior, dims=dims)
 
 
 def parse_flips(text):

@@ -1,7 +1,8 @@
 """Benchmark of initialization (Bregler & Malik §2.6), model fine-tuning (§2.7) and calibration.
 
 Prints one table: initial-pose error against the generating body's joints (body-model poses)
-or the capture's joints (CMU poses), segment lengths, bad-click detection, dimension
+or the capture's joints (CMU poses; in one view also with the performer's lengths from a
+three-view init, ``--dims-from``), segment lengths, bad-click detection, dimension
 refinement over a sequence, fine-tuning after tracking, and board calibration on synthetic
 images. Targets (issue #3):
 MPJPE <= 25 mm with 3 calibrated views, Procrustes-aligned MPJPE <= 40 mm with 1 uncalibrated

@@ -179,17 +179,18 @@ def read_dims(path, template):
     try:
         data = json.loads(path.read_text())
     except FileNotFoundError:
-        raise ZoopraxisError(f"{path}: no such file (--dims-from)") from None
+        raise ZoopraxisError(f"{path}: no such file") from None
     except (OSError, ValueError) as error:
         raise ZoopraxisError(f"{path}: not readable JSON ({error})") from None
-    body = data.get("body") if isinstance(data, dict) and "body" in data else data
-    if not isinstance(data, dict) or data.get("format") not in ("zoopraxis-init/1",
+    # init.json keeps the body's template and lengths at the top, result.json under "body"
+    body = data.get("body", data) if isinstance(data, dict) else None
+    if not isinstance(body, dict) or data.get("format") not in ("zoopraxis-init/1",
                                                                 "zoopraxis-track/1") \
-            or not isinstance(body, dict) or not isinstance(body.get("dims"), dict):
+            or not isinstance(body.get("dims"), dict):
         raise ZoopraxisError(f"{path}: not an init.json or result.json with body dimensions")
     if body.get("template", "full") != template:
         raise ZoopraxisError(f"{path}: dimensions of the '{body.get('template', 'full')}' "
-                             f"body, not of '{template}' (--template)")
+                             f"body, not of '{template}'")
     try:
         dims = {name: float(body["dims"][name]) for name in LENGTH_DIMS
                 if name in body["dims"]}

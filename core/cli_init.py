@@ -99,4 +99,3 @@ def main(argv):
         raise ZoopraxisError(f"{out}: cannot write ({error.strerror})") from None
     print(f"wrote {out}")
     return 0
-

@@ -487,8 +487,8 @@ def finetune(plates, anchors, cameras, *, result=None, init=None, frames=None, o
         When ``init`` is not given, for anchor frames clicked in one view: the body parts
         turned to their other depth and the pose prior (:func:`initialize.initialize`).
     dims : dict, optional
-        When ``init`` is not given: the performer's body lengths, kept instead of fitted to the clicks (the
-        refinement still refines them).
+        When ``init`` is not given: the performer's body lengths, kept instead of fitted to
+        the clicks (the refinement still refines them).
 
     Returns
     -------

@@ -60,7 +60,7 @@ def test_track_writes_a_result(take, tmp_path):
     (["--workers", "-1"], "--workers -1"),
     (["--flip", "0:tail"], "--flip '0:tail': expected FRAME:PART"),
     (["--flip", "3:left-leg"], "frame 3 is not an anchor frame"),
-    (["--dims-from", "nope.json"], "nope.json: no such file (--dims-from)"),
+    (["--dims-from", "nope.json"], "nope.json: no such file"),
 ])
 def test_track_bad_input_is_one_line(take, tmp_path, change, message):
     run = zoopraxis(*track_args(take, tmp_path / "r.json", *change))
@@ -84,7 +84,7 @@ def test_track_one_view_with_a_limb_flipped_in_depth(take, tmp_path):
 
 def test_track_one_view_keeps_the_lengths_of_a_calibrated_init(take, tmp_path):
     """--dims-from: the one-view track's body has the lengths the two calibrated views
-    fitted, not lengths of its own."""
+    fitted, not lengths of its own; init takes the lengths of a result.json too."""
     init_json = tmp_path / "init.json"
     run = zoopraxis("init", "--plate", f"cam0={take / 'cam0'}", "--plate",
                     f"cam1={take / 'cam1'}", "--markers", take / "markers.json",
@@ -106,6 +106,14 @@ def test_track_one_view_keeps_the_lengths_of_a_calibrated_init(take, tmp_path):
                for n in ("thigh", "shank", "upper_arm", "forearm", "torso"))
     assert any(abs(lengths[0][n] - measured[n]) > 1e-3
                for n in ("thigh", "shank", "upper_arm", "forearm", "torso"))
+    # ... and a result.json's body serves as well
+    again = tmp_path / "again.json"
+    run = zoopraxis("init", "--plate", f"cam0={take / 'cam0'}", "--markers",
+                    tmp_path / "markers.json", "--dims-from", tmp_path / "result0.json",
+                    "--out", again)
+    assert run.returncode == 0, run.stderr
+    assert json.loads(again.read_text())["dims"]["thigh"] == pytest.approx(lengths[0]["thigh"],
+                                                                          abs=1e-5)
 
 
 def test_calibration_missing_a_view(take, tmp_path):
