@@ -134,32 +134,29 @@ def gather(context, *, need_markers=True):
     fps = scene.render.fps / scene.render.fps_base
     import bpy
 
+    template = settings.template.lower()
+
+    def read_file(field, hint, path, read):
+        """``read(path, template)`` of a panel's file field (None when empty), now: a missing
+        file, or one of another template, is refused before any job starts."""
+        if not path:
+            return None
+        try:
+            return read(path, template)
+        except ZoopraxisError as ex:
+            for plate in plates.values():
+                plate.close()
+            raise ZoopraxisError(f"{field}: {ex} ({hint})") from None
+
     pose_prior = bpy.path.abspath(settings.pose_prior_path) if settings.pose_prior_path else ""
-    if pose_prior:
-        # Read now (once per file version), so that a missing file or a prior of another
-        # template is refused before any job starts.
-        try:
-            _import("initialize", "Initialization").resolve_pose_prior(
-                pose_prior, settings.template.lower())
-        except ZoopraxisError as ex:
-            for plate in plates.values():
-                plate.close()
-            raise ZoopraxisError(f"Pose Prior: {ex} (clear the field for the shipped "
-                                 "prior)") from None
-    dims_path = bpy.path.abspath(settings.dims_path) if settings.dims_path else ""
-    dims = None
-    if dims_path:
-        try:
-            dims = _import("cli_common", "Initialization").read_dims(
-                dims_path, settings.template.lower())
-        except ZoopraxisError as ex:
-            for plate in plates.values():
-                plate.close()
-            raise ZoopraxisError(f"Body Lengths From: {ex} (clear the field to fit the "
-                                 "lengths)") from None
+    read_file("Pose Prior", "clear the field for the shipped prior", pose_prior,
+              lambda *a: _import("initialize", "Initialization").resolve_pose_prior(*a))
+    dims = read_file("Body Lengths From", "clear the field to fit the lengths",
+                     bpy.path.abspath(settings.dims_path) if settings.dims_path else "",
+                     lambda *a: _import("cli_common", "Initialization").read_dims(*a))
     anchor_frames = {a.frame for a in anchors}
     flips = {f: p for f, p in parse_flips(settings.depth_flips).items() if f in anchor_frames}
-    return Take(plates, paths, offsets, anchors, cameras, frames, settings.template.lower(),
+    return Take(plates, paths, offsets, anchors, cameras, frames, template,
                 settings.tracker.lower(), n, fps, flips=flips or None,
                 camera_tilt=settings.camera_tilt, pose_prior=pose_prior, dims=dims)
 
