@@ -201,6 +201,11 @@ def body_model_cases(table, rng, n):
         table.add(case, "time s", secs)
 
 
+def cmu_frames(length, k, n):
+    """The frames of a take of ``length`` frames judged by a CMU row of ``k`` times n/2."""
+    return np.linspace(0, length - 1, k * max(2, n // 2)).astype(int)
+
+
 def cmu_cases(table, rng, n):
     """CMU frames, clicked with noise. The single-view case uses a pose prior learned without
     the frame's own take (leave one take out: 131_01 is judged by a prior from 131_02, 131_03
@@ -215,9 +220,8 @@ def cmu_cases(table, rng, n):
     for name in ("131_01", "131_03", "01_01"):
         joints = bvh.standard_joints(bvh.load_cmu(CMU / f"{name}.bvh", fps=30))
         for k in (1, ONE_VIEW_TRIALS):
-            frames.setdefault(k, []).extend(
-                (name, joints[i])
-                for i in np.linspace(0, len(joints) - 1, k * max(2, n // 2)).astype(int))
+            frames.setdefault(k, []).extend((name, joints[i])
+                                            for i in cmu_frames(len(joints), k, n))
     priors = {}
     for views, calibrated, plate in ((3, True, VGA_4M), (1, False, FHD_100M)):
         err, pa, pa_first, pa_off, nats, flipped = [], [], [], [], [], []
@@ -271,7 +275,6 @@ def known_lengths_cases(table, rng, n):
     for name, other in (("131_01", "131_03"), ("131_03", "131_01"), ("01_01", "01_01")):
         joints = bvh.standard_joints(bvh.load_cmu(CMU / f"{name}.bvh", fps=30))
         shoot = bvh.standard_joints(bvh.load_cmu(CMU / f"{other}.bvh", fps=30))
-        picked = np.linspace(0, len(joints) - 1, ONE_VIEW_TRIALS * max(2, n // 2)).astype(int)
         third = len(shoot) // 3
         target = shoot[third, JOINT_INDEX["pelvis"]].copy()
         target[2] = 1.0
@@ -281,7 +284,7 @@ def known_lengths_cases(table, rng, n):
         body = init.initialize(anchors, {c.name: c for c in cams}).body
         seg.append(100 * segment_error(body, fit3d.dims_from_joints(shoot[::30])))
         prior = init.PosePrior.load(exclude=[name])
-        for i in picked:
+        for i in cmu_frames(len(joints), ONE_VIEW_TRIALS, n):
             X = joints[i]
             target = X[JOINT_INDEX["pelvis"]].copy()
             target[2] = 1.0
