@@ -201,6 +201,20 @@ def body_model_cases(table, rng, n):
         table.add(case, "time s", secs)
 
 
+def cmu_joints(name):
+    """The standard joints of a CMU take of the shared data, at 30 fps."""
+    from zoopraxis.core import bvh
+
+    return bvh.standard_joints(bvh.load_cmu(CMU / f"{name}.bvh", fps=30))
+
+
+def aim_at(X):
+    """Where a ring of cameras looks at a body with joints ``X``: 1 m above its pelvis."""
+    target = X[JOINT_INDEX["pelvis"]].copy()
+    target[2] = 1.0
+    return target
+
+
 def cmu_frames(length, k, n):
     """The frames of a take of ``length`` frames judged by a CMU row of ``k`` times n/2."""
     return np.linspace(0, length - 1, k * max(2, n // 2)).astype(int)
@@ -211,14 +225,14 @@ def cmu_cases(table, rng, n):
     the frame's own take (leave one take out: 131_01 is judged by a prior from 131_02, 131_03
     and 01_01, and so on; 01_01 is subject 1, the only capture of that subject, so its prior
     has never seen that subject)."""
-    from zoopraxis.core import bvh, fit3d
+    from zoopraxis.core import fit3d
 
     if not CMU.is_dir():
         print(f"  (no CMU data at {CMU}: CMU cases skipped)", file=sys.stderr)
         return
     frames = {}
     for name in ("131_01", "131_03", "01_01"):
-        joints = bvh.standard_joints(bvh.load_cmu(CMU / f"{name}.bvh", fps=30))
+        joints = cmu_joints(name)
         for k in (1, ONE_VIEW_TRIALS):
             frames.setdefault(k, []).extend((name, joints[i])
                                             for i in cmu_frames(len(joints), k, n))
@@ -228,9 +242,7 @@ def cmu_cases(table, rng, n):
         for k, (name, X) in enumerate(frames[1 if calibrated else ONE_VIEW_TRIALS]):
             if name not in priors:
                 priors[name] = init.PosePrior.load(exclude=[name])
-            target = X[JOINT_INDEX["pelvis"]].copy()
-            target[2] = 1.0
-            cams = ring(views, rng, plate, target)
+            cams = ring(views, rng, plate, aim_at(X))
             anchor = [Anchor(0, clicks(cams, X, rng))]
             result = init.initialize(anchor, {c.name: c for c in cams}, calibrated=calibrated,
                                      pose_prior=priors[name])
@@ -267,18 +279,16 @@ def known_lengths_cases(table, rng, n):
     init fitted to three frames of another take of the same performer (131_01 and 131_03 of
     subject 131 each other's; 01_01, subject 1's only take, three of its frames the row does
     not judge) with the same click noise."""
-    from zoopraxis.core import bvh, fit3d
+    from zoopraxis.core import fit3d
 
     if not CMU.is_dir():
         return
     pa, seg, secs = [], [], []
     for name, other in (("131_01", "131_03"), ("131_03", "131_01"), ("01_01", "01_01")):
-        joints = bvh.standard_joints(bvh.load_cmu(CMU / f"{name}.bvh", fps=30))
-        shoot = bvh.standard_joints(bvh.load_cmu(CMU / f"{other}.bvh", fps=30))
+        joints = cmu_joints(name)
+        shoot = cmu_joints(other)
         third = len(shoot) // 3
-        target = shoot[third, JOINT_INDEX["pelvis"]].copy()
-        target[2] = 1.0
-        cams = ring(3, rng, FHD_10M, target)
+        cams = ring(3, rng, FHD_10M, aim_at(shoot[third]))
         anchors = [Anchor(int(f), clicks(cams, shoot[f], rng))
                    for f in (7, third + 7, 2 * third + 7)]
         body = init.initialize(anchors, {c.name: c for c in cams}).body
@@ -286,9 +296,7 @@ def known_lengths_cases(table, rng, n):
         prior = init.PosePrior.load(exclude=[name])
         for i in cmu_frames(len(joints), ONE_VIEW_TRIALS, n):
             X = joints[i]
-            target = X[JOINT_INDEX["pelvis"]].copy()
-            target[2] = 1.0
-            cam = ring(1, rng, FHD_100M, target)
+            cam = ring(1, rng, FHD_100M, aim_at(X))
             t = time.perf_counter()
             result = init.initialize([Anchor(0, clicks(cam, X, rng))], {cam[0].name: cam[0]},
                                      calibrated=False, pose_prior=prior, dims=body.dims,
@@ -308,20 +316,18 @@ def one_view_anchors_cases(table, rng, n, apart=25):
     in one camera, each judged. CMU takes, held-out pose prior, as in the one-view CMU row.
     (It barely does: a length shorter than the prior's and a foreshortened one click alike
     in every frame, only a longer one shows; ``--dims-from`` is the remedy.)"""
-    from zoopraxis.core import bvh, fit3d
+    from zoopraxis.core import fit3d
 
     if not CMU.is_dir():
         return
     together, alone, seg_together, seg_alone = [], [], [], []
     for name in ("131_01", "131_03", "01_01"):
-        joints = bvh.standard_joints(bvh.load_cmu(CMU / f"{name}.bvh", fps=30))
+        joints = cmu_joints(name)
         true_dims = fit3d.dims_from_joints(joints[::30])
         prior = init.PosePrior.load(exclude=[name])
         for i in np.linspace(0, len(joints) - 1, max(2, n // 3)).astype(int):
             frames = [int(i + k * apart) % len(joints) for k in range(3)]
-            target = joints[i, JOINT_INDEX["pelvis"]].copy()
-            target[2] = 1.0
-            cam = ring(1, rng, FHD_100M, target)
+            cam = ring(1, rng, FHD_100M, aim_at(joints[i]))
             anchors = [Anchor(f, clicks(cam, joints[f], rng)) for f in frames]
             cameras = {cam[0].name: cam[0]}
             result = init.initialize(anchors, cameras, calibrated=False, pose_prior=prior)
