@@ -741,11 +741,18 @@ class ScaledOrthoCamera(_Camera):
         Translation world -> camera; its z component only shifts ``depth``. Default zero.
     c : array_like, shape (2,), optional
         Principal point in pixels; default the image centre ``((w - 1) / 2, (h - 1) / 2)``.
+    kappa : float, optional
+        Perspective, as the inverse distance (1/m) from the camera to the world origin along
+        ``forward``; default 0 (scaled orthographic). With ``kappa > 0`` the camera is a
+        pinhole of focal length ``s / kappa`` pixels, with ``s`` the scale at the origin's
+        depth: :math:`(u, v)^T = s\\,[R X + t]_{xy} / (1 + \\kappa\\,(R X)_z) + c`. One
+        uncalibrated view of a near body fits it (:mod:`initialize`).
 
     Convention:
-        Camera axes are OpenCV's. Rays are parallel, along the camera +z axis (``forward``);
-        ``depth`` is the camera z, ``(R @ X + t)[2]``, and may be negative. The camera has no
-        centre (it is at infinity): ``center`` is None.
+        Camera axes are OpenCV's. ``depth`` is the camera z, ``(R @ X + t)[2]``, and may be
+        negative. With ``kappa = 0`` rays are parallel, along the camera +z axis (``forward``),
+        and the camera has no centre (it is at infinity): ``center`` is None. With
+        ``kappa > 0`` they meet at ``center``, at depth ``t[2] - 1 / kappa``.
     """
 
     model: ClassVar[str] = "scaled_orthographic"
@@ -756,12 +763,18 @@ class ScaledOrthoCamera(_Camera):
     R: np.ndarray = None
     t: np.ndarray = None
     c: np.ndarray = None
+    kappa: float = 0.0
 
     def __post_init__(self):
         if not isinstance(self.name, str) or not self.name:
             raise ZoopraxisError(f"camera name must be a non-empty string, got {self.name!r}")
         where = f"camera '{self.name}'"
         set_ = object.__setattr__
+        kappa = float(_as_array(self.kappa, (), f"{where}: kappa"))
+        if not 0.0 <= kappa < np.inf:
+            raise ZoopraxisError(f"{where}: kappa (1 / distance in metres) must be 0 or more, "
+                                 f"got {kappa:g}")
+        set_(self, "kappa", kappa)
         size = check_image_size(self.image_size, f"{where}: image_size")
         set_(self, "image_size", size)
         s = float(_as_array(self.s, (), f"{where}: s"))
@@ -776,15 +789,20 @@ class ScaledOrthoCamera(_Camera):
         set_(self, "c", _frozen(_as_array(c, (2,), f"{where}: c")))
 
     def __repr__(self):
-        return self._short_repr(f"s={self.s:.6g}, c=({self.c[0]:.6g}, {self.c[1]:.6g})")
+        kappa = f", kappa={self.kappa:.6g}" if self.kappa else ""
+        return self._short_repr(f"s={self.s:.6g}, c=({self.c[0]:.6g}, {self.c[1]:.6g}){kappa}")
 
     @property
     def center(self):
-        """None: a scaled orthographic camera is at infinity (use ``forward``, ``pixel_rays``)."""
-        return None
+        """None when ``kappa`` is 0: the camera is at infinity (use ``forward``,
+        ``pixel_rays``). Else the centre of projection in world coordinates, shape (3,)."""
+        if not self.kappa:
+            return None
+        return self.world_from_cam([0.0, 0.0, self.t[2] - 1.0 / self.kappa])
 
     def project(self, X):
-        """Project world points to pixels, eq. (11) with a principal point.
+        """Project world points to pixels, eq. (11) with a principal point (and the
+        perspective divide of ``kappa``).
 
         Convention: world (Z up, metres) to OpenCV pixels.
 
@@ -797,10 +815,15 @@ class ScaledOrthoCamera(_Camera):
         uv : array, shape (..., 2)
         """
         X = _as_points(X, 3)
+        if self.kappa:
+            Xc = X @ self.R.T
+            return self.s * (Xc[..., :2] + self.t[:2]) / (1.0 + self.kappa * Xc[..., 2:]) \
+                + self.c
         return self.s * (X @ self.R[:2].T + self.t[:2]) + self.c
 
     def project_jacobian(self, X):
-        """Project world points and return ``d uv / d X_world = s * R[:2]`` for each point.
+        """Project world points and return ``d uv / d X_world`` for each point (``s * R[:2]``
+        when ``kappa`` is 0).
 
         Parameters
         ----------
@@ -812,6 +835,13 @@ class ScaledOrthoCamera(_Camera):
         J : array, shape (..., 2, 3)
         """
         uv = self.project(X)
+        if self.kappa:
+            Xc = _as_points(X, 3) @ self.R.T
+            d = 1.0 + self.kappa * Xc[..., 2]
+            num = Xc[..., :2] + self.t[:2]
+            J = self.s * (self.R[:2] / d[..., None, None]
+                          - (num * self.kappa / d[..., None]**2)[..., None] * self.R[2])
+            return uv, J
         return uv, np.broadcast_to(self.s * self.R[:2], uv.shape[:-1] + (2, 3)).copy()
 
     def undistort_points(self, uv):
@@ -825,8 +855,9 @@ class ScaledOrthoCamera(_Camera):
     def rays(self, uv):
         """Viewing rays through pixels, in world coordinates.
 
-        Convention: OpenCV pixels to world rays; the origin is on the plane ``z_cam = 0`` and
-        ``origin + d * dir`` projects back to ``uv`` for every ``d`` (at depth ``d``).
+        Convention: OpenCV pixels to world rays; ``origin + d * dir`` projects back to ``uv``
+        for every ``d > 0``. With ``kappa`` 0 the origin is on the plane ``z_cam = 0`` (and
+        ``d`` may be negative too); else it is the camera centre, as for a pinhole.
 
         Parameters
         ----------
@@ -834,10 +865,14 @@ class ScaledOrthoCamera(_Camera):
 
         Returns
         -------
-        origins : array, shape (..., 3)
+        origins : array, shape (..., 3), or (3,) when ``kappa`` is not 0
         dirs : array, shape (..., 3)
-            All equal to ``forward``.
+            Unit directions: all equal to ``forward`` when ``kappa`` is 0.
         """
+        if self.kappa:
+            center = self.center
+            d = self.unproject(uv, self.t[2]) - center
+            return center, d / np.linalg.norm(d, axis=-1, keepdims=True)
         origins = self.unproject(uv, 0.0)
         return origins, np.broadcast_to(self.R[2], origins.shape).copy()
 
@@ -857,6 +892,8 @@ class ScaledOrthoCamera(_Camera):
         """
         xy = (_as_points(uv, 2) - self.c) / self.s
         z = np.broadcast_to(np.asarray(depth, dtype=np.float64), xy.shape[:-1])
+        if self.kappa:
+            xy = xy * (1.0 + self.kappa * (z - self.t[2]))[..., None]
         return self.world_from_cam(np.concatenate([xy, z[..., None]], axis=-1))
 
     def scaled(self, factor, sampling="pyramid"):
@@ -872,25 +909,31 @@ class ScaledOrthoCamera(_Camera):
         Returns
         -------
         camera : ScaledOrthoCamera
-            ``s`` times ``factor``, principal point moved with the pixels.
+            ``s`` times ``factor``, principal point moved with the pixels (``kappa`` kept).
         """
         size = self._check_scaling(factor, sampling)
         return self.replace(image_size=size, s=self.s * factor,
                             c=_scale_pixel(self.c, factor, sampling))
 
     def to_dict(self):
-        """The camera as a calibration.json entry, marked ``"model": "scaled_orthographic"``."""
-        return {"model": self.model, "name": self.name, "image_size": list(self.image_size),
-                "s": self.s, "R": self.R.tolist(), "t": self.t.tolist(), "c": self.c.tolist()}
+        """The camera as a calibration.json entry, marked ``"model": "scaled_orthographic"``
+        (``kappa`` only when not 0)."""
+        entry = {"model": self.model, "name": self.name, "image_size": list(self.image_size),
+                 "s": self.s, "R": self.R.tolist(), "t": self.t.tolist(), "c": self.c.tolist()}
+        if self.kappa:
+            entry["kappa"] = self.kappa
+        return entry
 
     @classmethod
     def from_dict(cls, entry, source=None):
-        """Make a camera from its calibration.json entry (``c`` optional; unknown keys ignored).
+        """Make a camera from its calibration.json entry (``c`` and ``kappa`` optional; unknown
+        keys ignored).
 
         Parameters
         ----------
         entry : dict
-            With keys ``name``, ``image_size``, ``s``, ``R``, ``t`` and optionally ``c``.
+            With keys ``name``, ``image_size``, ``s``, ``R``, ``t`` and optionally ``c`` and
+            ``kappa``.
         source : str, optional
             The file the entry comes from, named in error messages.
 
@@ -898,7 +941,8 @@ class ScaledOrthoCamera(_Camera):
         -------
         camera : ScaledOrthoCamera
         """
-        return _from_dict(cls, entry, ("name", "image_size", "s", "R", "t"), source, ("c",))
+        return _from_dict(cls, entry, ("name", "image_size", "s", "R", "t"), source,
+                          ("c", "kappa"))
 
 
 def _from_dict(cls, entry, required, source, optional=()):

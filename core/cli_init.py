@@ -32,6 +32,10 @@ def build_parser():
                         "depth (PART: left-arm, right-arm, left-leg, right-leg or body); "
                         "repeat for more")
     add_camera_tilt_argument(p)
+    p.add_argument("--perspective", action="store_true",
+                   help="uncalibrated views near the body (a phone or a normal lens a few metres "
+                        "away): fit each camera's perspective too (default: far or telephoto "
+                        "views, scaled orthographic)")
     add_output_arguments(p, "init.json")
     return p
 
@@ -53,6 +57,9 @@ def main(argv):
     if args.camera_tilt is not None and args.calibration:
         raise ZoopraxisError("--camera-tilt is for uncalibrated views: the calibration gives "
                              "the cameras' tilt")
+    if args.perspective and args.calibration:
+        raise ZoopraxisError("--perspective is for uncalibrated views: the calibration gives "
+                             "the cameras' perspective")
     dims = read_dims(args.dims_from, args.template) if args.dims_from else None
     plates = open_plates(parse_plate_options(args.plate))
     views = list(plates)
@@ -76,12 +83,16 @@ def main(argv):
                         calibrated=bool(args.calibration), dims=dims,
                         fit_dims=not (args.fixed_dims or dims),
                         views=views, pose_prior=pose_prior,
-                        flips=flips, camera_tilt=camera_tilt)
+                        flips=flips, camera_tilt=camera_tilt, perspective=args.perspective)
     print("body dimensions (m): " + ", ".join(f"{name} {result.body.dims[name]:.3f}"
                                              for name in LENGTH_DIMS)
           + (f" (kept from {args.dims_from})" if dims else ""))
     print("rms per view (px): " + ", ".join(f"{view} {rms:.2f}"
                                            for view, rms in result.rms.items()))
+    if args.perspective:
+        print("camera distance (m): " + ", ".join(
+            f"{view} {1.0 / cam.kappa:.1f}" if cam.kappa else f"{view} far"
+            for view, cam in result.cameras.items()))
     for warning in result.warnings:
         print(f"warning: {warning}")
     for note in result.flip_notes():

@@ -145,8 +145,16 @@ _TORSO = [JOINT_INDEX[n] for n in ("pelvis", "l_hip", "r_hip", "neck", "l_should
 OUTLIER_PX = 4.0 * LOSS_SCALE_PX
 OUTLIER_RATIO = 5.0
 
+# Uncalibrated views of a near body (``initialize(..., perspective=True)``): the perspective of
+# each camera (``ScaledOrthoCamera.kappa``, the inverse distance) is fitted, for cameras at least
+# 1 / KAPPA_MAX metres from the body. It is not left to the clicks to say whether a view is
+# near: an orthographic fit of a near view bends the pose to meet them, so that freeing the
+# perspective lowers its cost by a nat or two there, no more than it does by fitting the clicks'
+# noise in a far view (where it only breaks the ties of depth that one view must report).
+KAPPA_MAX = 0.5
+
 _ROOT_PARAMS = 6   # per frame: translation (3), rotation increment (3)
-_CAM_PARAMS = 6    # per scaled orthographic camera: log scale, rotation increment (3), shift (2)
+_CAM_PARAMS = 7    # per uncalibrated camera: log scale, rotation increment (3), shift (2), kappa
 _MIN_VIEW_JOINTS = 4       # an uncalibrated view needs this many clicks to place its camera
 _MIN_FRAME_JOINTS = 6      # joints a frame needs in its best view to pose the body
 # A limb whose mirror image moves no joint more than this is not worth trying mirrored.
@@ -647,14 +655,17 @@ class _Problem:
 
     Parameter vector: ``[dims (D), size]`` when the dimensions are fitted, then per frame
     ``[root translation (3), root rotation increment (3)]`` when roots are free and the angles
-    when they are, then ``[log scale, rotation increment (3), image shift (2)]`` per free
-    (scaled orthographic) camera. Residuals: the weighted click errors (2 per clicked joint and
-    view, robust), then the priors.
+    when they are, then ``[log scale, rotation increment (3), image shift (2), kappa]`` per free
+    (scaled orthographic) camera; ``kappa`` stays the camera's own but in the frames where
+    ``perspective`` (bool, or per frame) is true.
+    Residuals: the weighted click errors (2 per clicked joint and view, robust), then the
+    priors.
     """
 
     def __init__(self, kin, obs, weights, state, *, free_root, free_angles=True, free_cams=None,
                  fit_dims=True, calibrated=True, loss_scale=LOSS_SCALE_PX, dims_range=DIMS_RANGE,
-                 pose_prior=None, prior_frames=None, tilt=None, tilt_frames=None):
+                 pose_prior=None, prior_frames=None, tilt=None, tilt_frames=None,
+                 perspective=False):
         self.kin = kin
         self.obs = np.asarray(obs, dtype=float)                     # (F, V, 17, 2)
         F, V = self.obs.shape[:2]
@@ -684,6 +695,8 @@ class _Problem:
         self.cam_index = np.full((F, V), -1)
         self.cam_index[free_cams] = np.arange(free_cams.sum())
         self.free_pairs = np.argwhere(free_cams)                     # (C, 2) frame, view
+        # Free cameras whose perspective is fitted
+        self.near = np.broadcast_to(np.asarray(perspective, bool), (F,))[self.free_pairs[:, 0]]
         D, n = len(state.dims), kin.n_dofs
         self.D = D
         self.frame_size = (_ROOT_PARAMS if free_root else 0) + (n if free_angles else 0)
@@ -699,6 +712,7 @@ class _Problem:
         self.cam_R = np.array([c.R for c in cams]).reshape(-1, 3, 3)
         self.cam_t = np.array([c.t[:2] for c in cams]).reshape(-1, 2)
         self.cam_c = np.array([c.c for c in cams]).reshape(-1, 2)
+        self.cam_k = np.array([getattr(c, "kappa", 0.0) for c in cams])
         self._cache_x = None
         self._fixed_joints = None       # the joints, when no body parameter is free
 
@@ -716,7 +730,9 @@ class _Problem:
             frame += [s.angles]
         if frame:
             parts.append(np.concatenate(frame, axis=1).ravel())
-        parts.append(np.zeros(_CAM_PARAMS * len(self.free_pairs)))
+        cam0 = np.zeros((len(self.free_pairs), _CAM_PARAMS))
+        cam0[:, 6] = self.cam_k
+        parts.append(cam0.ravel())
         x = np.concatenate([np.ravel(p) for p in parts])
         lo, hi = self.bounds()
         return np.clip(x, lo, hi)
@@ -733,6 +749,8 @@ class _Problem:
             cols = a0 + np.arange(self.F)[:, None] * self.frame_size + np.arange(self.kin.n_dofs)
             lo[cols] = self.kin.lower
             hi[cols] = self.kin.upper
+        k = self.off_cam + np.flatnonzero(self.near) * _CAM_PARAMS + 6
+        lo[k], hi[k] = 0.0, np.maximum(KAPPA_MAX, self.cam_k[self.near])
         return lo, hi
 
     def _split(self, x):
@@ -760,18 +778,19 @@ class _Problem:
         out.roots[:, :3, :3] = se3.orthonormalize(R)
         out.roots[:, :3, 3] = p
         out.angles = np.clip(angles, self.kin.lower, self.kin.upper)
-        s, Rc, t = self._cam_params(cams)
+        s, Rc, t, k = self._cam_params(cams)
         for i, (f, v) in enumerate(self.free_pairs):
             old = out.cameras[f][v]
             out.cameras[f][v] = old.replace(s=s[i], R=se3.orthonormalize(Rc[i]),
-                                            t=np.array([t[i, 0], t[i, 1], old.t[2]]))
+                                            t=np.array([t[i, 0], t[i, 1], old.t[2]]),
+                                            kappa=float(k[i]))
         return out
 
     def _cam_params(self, cams):
         s = self.cam_s * np.exp(cams[:, 0])
         R = se3.exp_so3(cams[:, 1:4]) @ self.cam_R
         t = self.cam_t + cams[:, 4:6]
-        return s, R, t
+        return s, R, t, np.where(self.near, cams[:, 6], self.cam_k)
 
     # -- evaluation ---------------------------------------------------------------------------
 
@@ -819,16 +838,22 @@ class _Problem:
                     uv[f, v], A[f, v] = self.state.cameras[f][v].project_jacobian(X[f])
         G = np.zeros((len(self.free_pairs), N_JOINTS, 2, _CAM_PARAMS))
         if len(self.free_pairs):
-            s, Rc, t = self._cam_params(cams)
+            s, Rc, t, k = self._cam_params(cams)
             fi, vi = self.free_pairs.T
             Xc = X[fi] @ np.swapaxes(Rc, -1, -2)                              # (C, 17, 3)
             shifted = Xc[..., :2] + t[:, None]
-            uv[fi, vi] = s[:, None, None] * shifted + self.cam_c[:, None]
-            A[fi, vi] = (s[:, None, None] * Rc[:, :2])[:, None]
-            G[..., 0] = s[:, None, None] * shifted
+            d = 1.0 + k[:, None] * Xc[..., 2]                                 # (C, 17)
+            sd = s[:, None] / d
+            uv[fi, vi] = sd[..., None] * shifted + self.cam_c[:, None]
+            q = sd[..., None] * shifted * (k[:, None, None] / d[..., None])  # (C, 17, 2)
+            A[fi, vi] = sd[..., None, None] * Rc[:, None, :2] \
+                - q[..., None] * Rc[:, None, None, 2]
+            G[..., 0] = sd[..., None] * shifted
             rot = -se3.hat3(Xc) @ se3.left_jacobian_so3(cams[:, 1:4])[:, None]
-            G[..., 1:4] = s[:, None, None, None] * rot[..., :2, :]
-            G[..., 0, 4] = G[..., 1, 5] = s[:, None]
+            G[..., 1:4] = sd[..., None, None] * rot[..., :2, :] - q[..., None] * rot[..., None, 2, :]
+            G[..., 0, 4] = G[..., 1, 5] = sd
+            G[..., 6] = -(sd * self.near[:, None])[..., None] * shifted \
+                * (Xc[..., 2] / d)[..., None]
         return uv, A, G
 
     def evaluate(self, x):
@@ -909,7 +934,7 @@ class _Problem:
         pick = np.flatnonzero(self.tilt_frames[self.free_pairs[:, 0]]) \
             if len(self.free_pairs) else []
         if len(pick):
-            _, Rc, _ = self._cam_params(cams)
+            _, Rc, _, _ = self._cam_params(cams)
             up = Rc[pick][:, :, 2]                                 # body Z, camera coordinates
             wt = CLICK_SIGMA_PX / self.tilt[1]
             res.append(wt * (up[:, 2] - self.tilt[0]))
@@ -1380,7 +1405,8 @@ def _seen_twice(anchor, views):
 
 
 def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None, fit_dims=True,
-               views=None, pose_prior="default", flips=None, camera_tilt=CAMERA_TILT_DEG):
+               views=None, pose_prior="default", flips=None, camera_tilt=CAMERA_TILT_DEG,
+               perspective=False):
     """Pose, angles and body dimensions from the clicked joints of anchor frames (§2.6).
 
     Parameters
@@ -1419,6 +1445,10 @@ def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None,
         to look down at the upright body, and give or take how much (a Gaussian prior on the
         depth lean one view cannot see; ``CAMERA_TILT_DEG``: level, 10 degrees). None: no
         prior. A camera looking up has a negative tilt.
+    perspective : bool
+        Uncalibrated: the views are near the body (a phone or a normal lens a few metres away,
+        at least 1 / KAPPA_MAX), so each camera's perspective is fitted too
+        (``ScaledOrthoCamera.kappa``). Default: far or telephoto views, scaled orthographic.
 
     Returns
     -------
@@ -1428,8 +1458,11 @@ def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None,
     ------
     ZoopraxisError
         No anchors, a view without a camera, a frame with too few clicks, a flip of an unknown
-        part or of a frame that is not an anchor.
+        part or of a frame that is not an anchor, perspective asked of calibrated views.
     """
+    if perspective and calibrated:
+        raise ZoopraxisError("perspective is fitted for uncalibrated views only (calibrated "
+                             "cameras have their own)")
     anchors = sorted(anchors, key=lambda a: a.frame)
     flips = check_flips(flips, [a.frame for a in anchors])
     frames = [a.frame for a in anchors]
@@ -1475,6 +1508,7 @@ def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None,
             down, spread = check_camera_tilt(camera_tilt)
             # A camera looking down sees the body's up axis turned away from it.
             fit.tilt = (-np.sin(np.radians(down)), np.sin(np.radians(spread)))
+        fit.near[:] = bool(perspective)
     pose_prior = resolve_pose_prior(pose_prior, template)
     fit.prior = None if pose_prior is None else \
         pose_prior.with_broad(kin.prior_mean, kin.prior_sigma)
@@ -2287,6 +2321,7 @@ class _UncalibratedFit(_Fit):
     def __init__(self, kin, obs, weights, sizes, views, anchors, dims0, fit_dims, warnings):
         super().__init__(kin, obs, weights, views, anchors, dims0, fit_dims, warnings)
         self.sizes = sizes
+        self.near = np.zeros(len(anchors), bool)    # frames whose views' perspective is fitted
         counts = np.isfinite(obs).all(axis=-1).sum(axis=-1)               # (F, V)
         self.usable = counts >= _MIN_VIEW_JOINTS
         for f, v in np.argwhere((counts > 0) & ~self.usable):
@@ -2297,7 +2332,8 @@ class _UncalibratedFit(_Fit):
 
     def options(self, state, f, fit_dims):
         free = np.array([[c is not None for c in row] for row in state.cameras])
-        options = dict(free_root=False, free_cams=free, fit_dims=fit_dims, calibrated=False)
+        options = dict(free_root=False, free_cams=free, fit_dims=fit_dims, calibrated=False,
+                       perspective=self.near if f is None else self.near[f])
         if self.prior is not None and PRIOR_WEIGHT > 0 and self._prior_in_fit:
             # Frames seen in one view: the learned prior decides what the clicks leave free.
             options.update(pose_prior=self.prior, prior_frames=free.sum(axis=1) == 1)

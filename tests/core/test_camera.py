@@ -24,9 +24,9 @@ def make_pinhole(dist=None, image_size=(160, 120), focal=150.0):
     return PinholeCamera("cam0", image_size, K, dist, R, t)
 
 
-def make_ortho(image_size=(160, 120)):
+def make_ortho(image_size=(160, 120), kappa=0.0):
     R, t = look_at([4.0, -3.0, 1.8], TARGET)
-    return ScaledOrthoCamera("side", image_size, 60.0, R, t, c=(81.0, 57.5))
+    return ScaledOrthoCamera("side", image_size, 60.0, R, t, c=(81.0, 57.5), kappa=kappa)
 
 
 CAMERAS = {
@@ -34,6 +34,7 @@ CAMERAS = {
     "pinhole_distorted": lambda: make_pinhole(LENS),
     "pinhole_asymmetric_lens": lambda: make_pinhole(LENS_ASYMMETRIC),
     "ortho": lambda: make_ortho(),
+    "ortho_near": lambda: make_ortho(kappa=0.12),
 }
 
 
@@ -121,6 +122,8 @@ def test_pinhole_bad_input(changes, message):
     ({"s": [1.0, 2.0]}, r"camera 'o': s must have shape \(\)"),
     ({"c": [1.0, 2.0, 3.0]}, r"camera 'o': c must have shape \(2,\)"),
     ({"R": np.ones((3, 3))}, r"camera 'o': R is not a rotation"),
+    ({"kappa": -0.1}, r"camera 'o': kappa \(1 / distance in metres\) must be 0 or more"),
+    ({"kappa": np.nan}, r"camera 'o': kappa contains NaN or infinity"),
 ])
 def test_ortho_bad_input(changes, message):
     fields = {"name": "o", "image_size": (64, 48), "s": 10.0, **changes}
@@ -202,7 +205,7 @@ def test_pixel_rays_shapes_and_cache(any_camera):
     w, h = any_camera.image_size
     origins, dirs = any_camera.pixel_rays()
     assert dirs.shape == (h, w, 3) and dirs.dtype == np.float64
-    expected_origins = (3,) if any_camera.model == "pinhole" else (h, w, 3)
+    expected_origins = (3,) if any_camera.center is not None else (h, w, 3)
     assert origins.shape == expected_origins
     assert any_camera.pixel_rays()[1] is dirs
     assert not dirs.flags.writeable
@@ -301,9 +304,31 @@ def test_points_along_pixel_rays_project_back_to_their_pixel(any_camera, rng):
     origins = np.broadcast_to(origins, dirs.shape)
     distance = rng.uniform(2.0, 8.0, size=(h, w, 1))
     np.testing.assert_allclose(any_camera.project(origins + distance * dirs), grid, atol=1e-8)
-    if any_camera.model == "scaled_orthographic":
+    if any_camera.model == "scaled_orthographic" and not any_camera.kappa:
         # Parallel rays: behind the origin plane too.
         np.testing.assert_allclose(any_camera.project(origins - distance * dirs), grid, atol=1e-8)
+
+
+def test_near_ortho_camera_is_the_pinhole_at_its_distance(rng):
+    # kappa = 1 / distance: the pinhole of focal s / kappa whose centre sits that far in front
+    # of the world origin along the view, seeing the origin's depth at s pixels per metre.
+    near = ScaledOrthoCamera("n", (640, 480), 300.0, R=rotation_z90(), t=[0.2, -0.1, 7.0],
+                             kappa=0.25)
+    f, c = 300.0 / 0.25, near.c
+    pinhole = PinholeCamera("n", (640, 480), [[f, 0, c[0]], [0, f, c[1]], [0, 0, 1]],
+                            R=rotation_z90(), t=[0.2, -0.1, 4.0])
+    X = rng.uniform(-1.0, 1.0, (30, 3))
+    np.testing.assert_allclose(near.project(X), pinhole.project(X), atol=1e-9)
+    np.testing.assert_allclose(near.center, pinhole.center, atol=1e-12)
+    assert near.replace(kappa=0.0).center is None
+    # The origin's depth keeps the scale of the scaled orthographic camera.
+    flat = near.replace(kappa=0.0)
+    on_plane = near.world_from_cam(np.c_[rng.uniform(-1, 1, (5, 2)), np.full(5, 7.0)])
+    np.testing.assert_allclose(near.project(on_plane), flat.project(on_plane), atol=1e-9)
+    origins, dirs = near.pixel_rays()
+    np.testing.assert_allclose(origins, pinhole.center, atol=1e-12)
+    np.testing.assert_allclose(dirs, pinhole.pixel_rays()[1], atol=1e-12)
+    assert "kappa=0.25" in repr(near) and "kappa" not in repr(flat)
 
 
 def test_pinhole_rays_leave_the_centre_and_ortho_rays_are_parallel():
