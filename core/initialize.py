@@ -850,7 +850,8 @@ class _Problem:
                 - q[..., None] * Rc[:, None, None, 2]
             G[..., 0] = sd[..., None] * shifted
             rot = -se3.hat3(Xc) @ se3.left_jacobian_so3(cams[:, 1:4])[:, None]
-            G[..., 1:4] = sd[..., None, None] * rot[..., :2, :] - q[..., None] * rot[..., None, 2, :]
+            G[..., 1:4] = sd[..., None, None] * rot[..., :2, :] \
+                - q[..., None] * rot[..., None, 2, :]
             G[..., 0, 4] = G[..., 1, 5] = sd
             G[..., 6] = -(sd * self.near[:, None])[..., None] * shifted \
                 * (Xc[..., 2] / d)[..., None]

@@ -1000,8 +1000,8 @@ def test_init_command_flips_a_limb_and_says_how(tmp_path, capsys):
 
 def test_init_command_fits_a_near_views_perspective(tmp_path, capsys):
     """``init --perspective``: the sample's cam0, 4.1 m from the walker, gets a camera
-    distance near that, printed and kept in init.json, which reads back to the same camera; calibrated views are refused
-    in one line."""
+    distance near that, printed and kept in init.json, which reads back to the same camera;
+    calibrated views are refused in one line."""
     from zoopraxis.core.calibfile import read_calibration
 
     root, markers, frame = _sample_first_anchor_in_cam0(tmp_path)
