@@ -771,7 +771,7 @@ class ScaledOrthoCamera(_Camera):
         where = f"camera '{self.name}'"
         set_ = object.__setattr__
         kappa = float(_as_array(self.kappa, (), f"{where}: kappa"))
-        if not 0.0 <= kappa < np.inf:
+        if kappa < 0.0:
             raise ZoopraxisError(f"{where}: kappa (1 / distance in metres) must be 0 or more, "
                                  f"got {kappa:g}")
         set_(self, "kappa", kappa)
@@ -834,14 +834,14 @@ class ScaledOrthoCamera(_Camera):
         uv : array, shape (..., 2)
         J : array, shape (..., 2, 3)
         """
-        uv = self.project(X)
         if self.kappa:
             Xc = _as_points(X, 3) @ self.R.T
             d = 1.0 + self.kappa * Xc[..., 2]
             num = Xc[..., :2] + self.t[:2]
             J = self.s * (self.R[:2] / d[..., None, None]
                           - (num * self.kappa / d[..., None]**2)[..., None] * self.R[2])
-            return uv, J
+            return self.s * num / d[..., None] + self.c, J
+        uv = self.project(X)
         return uv, np.broadcast_to(self.s * self.R[:2], uv.shape[:-1] + (2, 3)).copy()
 
     def undistort_points(self, uv):

@@ -712,7 +712,7 @@ class _Problem:
         self.cam_R = np.array([c.R for c in cams]).reshape(-1, 3, 3)
         self.cam_t = np.array([c.t[:2] for c in cams]).reshape(-1, 2)
         self.cam_c = np.array([c.c for c in cams]).reshape(-1, 2)
-        self.cam_k = np.array([getattr(c, "kappa", 0.0) for c in cams])
+        self.cam_k = np.array([c.kappa for c in cams])
         self._cache_x = None
         self._fixed_joints = None       # the joints, when no body parameter is free
 
@@ -1509,7 +1509,7 @@ def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None,
             down, spread = check_camera_tilt(camera_tilt)
             # A camera looking down sees the body's up axis turned away from it.
             fit.tilt = (-np.sin(np.radians(down)), np.sin(np.radians(spread)))
-        fit.near[:] = bool(perspective)
+        fit.perspective = bool(perspective)
     pose_prior = resolve_pose_prior(pose_prior, template)
     fit.prior = None if pose_prior is None else \
         pose_prior.with_broad(kin.prior_mean, kin.prior_sigma)
@@ -2322,7 +2322,6 @@ class _UncalibratedFit(_Fit):
     def __init__(self, kin, obs, weights, sizes, views, anchors, dims0, fit_dims, warnings):
         super().__init__(kin, obs, weights, views, anchors, dims0, fit_dims, warnings)
         self.sizes = sizes
-        self.near = np.zeros(len(anchors), bool)    # frames whose views' perspective is fitted
         counts = np.isfinite(obs).all(axis=-1).sum(axis=-1)               # (F, V)
         self.usable = counts >= _MIN_VIEW_JOINTS
         for f, v in np.argwhere((counts > 0) & ~self.usable):
@@ -2334,7 +2333,7 @@ class _UncalibratedFit(_Fit):
     def options(self, state, f, fit_dims):
         free = np.array([[c is not None for c in row] for row in state.cameras])
         options = dict(free_root=False, free_cams=free, fit_dims=fit_dims, calibrated=False,
-                       perspective=self.near if f is None else self.near[f])
+                       perspective=self.perspective)
         if self.prior is not None and PRIOR_WEIGHT > 0 and self._prior_in_fit:
             # Frames seen in one view: the learned prior decides what the clicks leave free.
             options.update(pose_prior=self.prior, prior_frames=free.sum(axis=1) == 1)
@@ -2503,6 +2502,7 @@ class _UncalibratedFit(_Fit):
         return fitted.cameras[0][v]
 
     tilt = None     # (mean, sigma): see CAMERA_TILT_DEG and _Problem
+    perspective = False     # the views' perspective (kappa) is fitted: see KAPPA_MAX
 
     def _tilt_cost(self, state):
         cams = [c for c in state.cameras[0] if c is not None]
