@@ -275,7 +275,8 @@ class ZOOPRAXIS_OT_initialize(JobOperator, bpy.types.Operator):
         settings.ambiguous_parts = pipeline.format_flips(
             getattr(init, "ambiguous_parts", {}) or {})
         return (f"Initialized at {len(init.poses)} anchor frame(s), click error up to "
-                f"{worst:.1f} px" + (f", {len(warnings)} warning(s)" if warnings else ""))
+                f"{worst:.1f} px" + (f", {len(warnings)} warning(s)" if warnings else "")
+                + (f"; {init.distance_note()}" if self._take.perspective else ""))
 
     def cleanup(self):
         take = getattr(self, "_take", None)

@@ -69,6 +69,7 @@ class Take:
     camera_tilt: float = 0.0    # degrees an uncalibrated one-view camera looks down
     pose_prior: str = ""        # a pose prior file for one-view anchors ("": the shipped one)
     dims: dict = None           # the performer's lengths, kept (None: fitted to the clicks)
+    perspective: bool = False   # uncalibrated views near the body: their perspective is fitted
 
     def prior(self):
         """``pose_prior`` for :func:`core.initialize.initialize`."""
@@ -158,7 +159,8 @@ def gather(context, *, need_markers=True):
     flips = {f: p for f, p in parse_flips(settings.depth_flips).items() if f in anchor_frames}
     return Take(plates, paths, offsets, anchors, cameras, frames, template,
                 settings.tracker.lower(), n, fps, flips=flips or None,
-                camera_tilt=settings.camera_tilt, pose_prior=pose_prior, dims=dims)
+                camera_tilt=settings.camera_tilt, pose_prior=pose_prior, dims=dims,
+                perspective=cameras is None and settings.near_cameras)
 
 
 def parse_flips(text):
@@ -192,7 +194,8 @@ def initialize(take, *, progress=None, cancel=None):
     result = call(module.initialize, inside, cameras, template=take.template,
                   calibrated=take.cameras is not None, views=list(take.plates),
                   flips=take.flips_at(inside), camera_tilt=take.tilt(),
-                  pose_prior=take.prior(), dims=take.dims, fit_dims=not take.dims)
+                  pose_prior=take.prior(), dims=take.dims, fit_dims=not take.dims,
+                  perspective=take.perspective)
     if progress:
         progress(1, 1)
     return result
@@ -200,8 +203,8 @@ def initialize(take, *, progress=None, cancel=None):
 
 def _fingerprint(take):
     """What an initialization depends on: template, calibration, the anchors' clicks and the
-    animator's choices for one-view anchors (flips, camera tilt, pose prior file) and the
-    body lengths kept from a file."""
+    animator's choices for one-view anchors (flips, camera tilt, pose prior file), near
+    uncalibrated views and the body lengths kept from a file."""
     clicks = tuple((a.frame, v, j, round(u, 2), round(w, 2))
                    for a in take.anchors if a.frame in take.frames
                    for v, joints in sorted(a.views.items())
@@ -217,7 +220,7 @@ def _fingerprint(take):
         except OSError:
             prior = (take.pose_prior, None)
     dims = None if not take.dims else tuple(sorted(take.dims.items()))
-    return take.template, cameras, clicks, flips, tilt, prior, dims
+    return take.template, cameras, clicks, flips, tilt, prior, dims, take.perspective
 
 
 def remember_initial(scene, init, take):
@@ -250,6 +253,7 @@ def track(take, *, init=None, progress=None, cancel=None, log=None):
         options["dims"] = take.dims
     if init is None and take.cameras is None and take.tracker == "differential":
         options["camera_tilt"] = take.tilt()
+        options["perspective"] = take.perspective
     if take.tracker == "differential":
         module = _import("track", "the differential tracker")
         return call(module.track, take.plates, take.anchors, take.cameras, **options)

@@ -126,6 +126,11 @@ class ZOOPRAXIS_PG_settings(bpy.types.PropertyGroup):
                     "or result.json of a shot seen in several views (one view alone sees the "
                     "lengths poorly). Empty: fit them to the clicks. Used by Initialize and "
                     "Track")
+    near_cameras: BoolProperty(
+        name="Near Cameras", default=False,
+        description="Uncalibrated views filmed from near the body (a phone or a normal lens a "
+                    "few metres away): fit each camera's perspective too. Off: far or telephoto "
+                    "views, scaled orthographic. Used by Initialize and Track")
     depth_flips: StringProperty(
         name="Depth Flips",
         description="FRAME:PART;... turned to their other depth by the animator (used by "

@@ -60,6 +60,23 @@ def add_camera_tilt_argument(parser):
                              "for no such prior")
 
 
+def add_perspective_argument(parser):
+    """``--perspective``: fit the perspective of uncalibrated views filmed from near."""
+    parser.add_argument("--perspective", action="store_true",
+                        help="uncalibrated views near the body (a phone or a normal lens a few "
+                             "metres away): fit each camera's perspective too (default: far or "
+                             "telephoto views, scaled orthographic)")
+
+
+def check_uncalibrated_options(args, calibrated):
+    """Refuse ``--camera-tilt`` and ``--perspective`` with a calibration, which gives both."""
+    for flag, given, what in (("--camera-tilt", args.camera_tilt is not None, "tilt"),
+                              ("--perspective", args.perspective, "perspective")):
+        if given and calibrated:
+            raise ZoopraxisError(f"{flag} is for uncalibrated views: the calibration gives "
+                                 f"the cameras' {what}")
+
+
 def add_pose_prior_arguments(parser):
     """``--pose-prior FILE`` and ``--no-pose-prior`` for frames clicked in one view."""
     parser.add_argument("--pose-prior", default=None, metavar="FILE",

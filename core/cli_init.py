@@ -5,7 +5,8 @@ import json
 import sys
 
 from .cli_common import (add_camera_tilt_argument, add_dims_argument, add_output_arguments,
-                         add_pose_prior_arguments, check_output, check_template,
+                         add_perspective_argument, add_pose_prior_arguments,
+                         check_output, check_template, check_uncalibrated_options,
                          parse_camera_tilt, parse_flips, parse_pose_prior, read_dims)
 from .errors import ZoopraxisError
 
@@ -32,10 +33,7 @@ def build_parser():
                         "depth (PART: left-arm, right-arm, left-leg, right-leg or body); "
                         "repeat for more")
     add_camera_tilt_argument(p)
-    p.add_argument("--perspective", action="store_true",
-                   help="uncalibrated views near the body (a phone or a normal lens a few metres "
-                        "away): fit each camera's perspective too (default: far or telephoto "
-                        "views, scaled orthographic)")
+    add_perspective_argument(p)
     add_output_arguments(p, "init.json")
     return p
 
@@ -54,12 +52,7 @@ def main(argv):
     flips = parse_flips(args.flip)
     camera_tilt = parse_camera_tilt(args.camera_tilt)
     pose_prior = parse_pose_prior(args, args.template)
-    if args.camera_tilt is not None and args.calibration:
-        raise ZoopraxisError("--camera-tilt is for uncalibrated views: the calibration gives "
-                             "the cameras' tilt")
-    if args.perspective and args.calibration:
-        raise ZoopraxisError("--perspective is for uncalibrated views: the calibration gives "
-                             "the cameras' perspective")
+    check_uncalibrated_options(args, bool(args.calibration))
     dims = read_dims(args.dims_from, args.template) if args.dims_from else None
     plates = open_plates(parse_plate_options(args.plate))
     views = list(plates)
@@ -90,9 +83,7 @@ def main(argv):
     print("rms per view (px): " + ", ".join(f"{view} {rms:.2f}"
                                            for view, rms in result.rms.items()))
     if args.perspective:
-        print("camera distance (m): " + ", ".join(
-            f"{view} {1.0 / cam.kappa:.1f}" if cam.kappa else f"{view} far"
-            for view, cam in result.cameras.items()))
+        print(result.distance_note())
     for warning in result.warnings:
         print(f"warning: {warning}")
     for note in result.flip_notes():

@@ -4,7 +4,8 @@ import argparse
 import time
 
 from .cli_common import (add_camera_tilt_argument, add_dims_argument, add_output_arguments,
-                         add_pose_prior_arguments, check_output, open_plates, parse_camera_tilt,
+                         add_perspective_argument, add_pose_prior_arguments, check_output,
+                         check_uncalibrated_options, open_plates, parse_camera_tilt,
                          parse_flips, parse_pose_prior, parse_view_values, read_dims)
 from .errors import ZoopraxisError
 from .progress import ConsoleProgress
@@ -45,6 +46,7 @@ def build_parser():
                         "depth (PART: left-arm, right-arm, left-leg, right-leg or body); "
                         "repeat for more")
     add_camera_tilt_argument(p)
+    add_perspective_argument(p)
     add_pose_prior_arguments(p)
     add_dims_argument(p)
     add_output_arguments(p, "result.json")
@@ -79,9 +81,7 @@ def main(argv):
         raise ZoopraxisError("--refine-body needs --calibration (calibrated views)")
     flips = parse_flips(args.flip)
     camera_tilt = parse_camera_tilt(args.camera_tilt)
-    if args.camera_tilt is not None and cameras is not None:
-        raise ZoopraxisError("--camera-tilt is for uncalibrated views: the calibration gives "
-                             "the cameras' tilt")
+    check_uncalibrated_options(args, cameras is not None)
     pose_prior = parse_pose_prior(args, args.template)
     dims = read_dims(args.dims_from, args.template) if args.dims_from else None
     stop = _StopOnInterrupt()
@@ -100,7 +100,7 @@ def main(argv):
 
             workers = args.workers or default_workers()
             result = track(opened, anchors, cameras, workers=workers, camera_tilt=camera_tilt,
-                           **kwargs)
+                           perspective=args.perspective, **kwargs)
         else:
             try:
                 from . import hybrid

@@ -251,7 +251,7 @@ def _projection(camera, X):
             return np.matmul(gc, R, out=out)
 
         return uv, _Pullback(pull, z)
-    if not hasattr(camera, "K"):
+    if not hasattr(camera, "K") and not camera.kappa:
         s = camera.s
         uv = s * Xc[:, :2] + camera.c
 

@@ -1292,6 +1292,13 @@ class InitResult:
         return [f"frame {frame}: flipped in depth: {', '.join(parts)}"
                 for frame, parts in sorted(self.flipped.items())]
 
+    def distance_note(self):
+        """One line: each uncalibrated view's fitted camera distance at the first anchor
+        (``perspective=True``; "far" where none was fitted)."""
+        return "camera distance (m): " + ", ".join(
+            f"{view} {1.0 / cam.kappa:.1f}" if getattr(cam, "kappa", 0.0) else f"{view} far"
+            for view, cam in self.cameras.items())
+
     @property
     def dims(self):
         """Fitted lengths, ``{name: metres}`` over ``LENGTH_DIMS``."""

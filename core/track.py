@@ -130,6 +130,16 @@ class FrameSource:
         return out
 
 
+def _blend_camera(a, b, w):
+    """Uncalibrated cameras between two states: the scale geometrically, the perspective
+    linearly (w: 0 -> a)."""
+    s = float(np.exp((1 - w) * np.log(a.s) + w * np.log(b.s)))
+    if not (a.kappa or b.kappa):
+        return a.replace(s=s)
+    kappa = (1 - w) * a.kappa + w * b.kappa
+    return a.replace(s=s, kappa=kappa, t=[0.0, 0.0, 1.0 / kappa])
+
+
 def blend_states(a, b, w):
     """Pose between two states: angles linearly, roots along the SE(3) geodesic (w: 0 -> a)."""
     out = a.copy()
@@ -138,8 +148,7 @@ def blend_states(a, b, w):
         rel = se3.log_se3(b.roots[c] @ se3.invert(a.roots[c]))
         out.roots[c] = se3.exp_se3(w * rel) @ a.roots[c]
     if hasattr(a.cameras[0], "s"):
-        out.cameras = [ca.replace(s=float(np.exp((1 - w) * np.log(ca.s) + w * np.log(cb.s))))
-                       for ca, cb in zip(a.cameras, b.cameras)]
+        out.cameras = [_blend_camera(ca, cb, w) for ca, cb in zip(a.cameras, b.cameras)]
     return out
 
 
@@ -656,10 +665,25 @@ def _run_in_processes(run, jobs, workers, progress, cancel, then=None):
     return results, cancelled or stop.is_set()
 
 
+def _tracking_camera(cam, body2cam, near):
+    """An uncalibrated view's camera as the tracker holds it: unrotated, the body's pose in the
+    camera frame (``body2cam``) carrying the rest. In a take with near cameras (``near``: some
+    ``kappa > 0``) the body is moved to the depth of the world origin (in place), where the
+    camera's scale ``s`` and perspective ``kappa`` are measured, and the camera's ``t_z``
+    keeps the depths it gives: a near camera has its centre at depth 0, where the renderer
+    puts a pinhole's. Far cameras of other takes are kept as they always were."""
+    if not near:
+        return ScaledOrthoCamera(cam.name, cam.image_size, cam.s, c=cam.c)
+    body2cam[2, 3] -= cam.t[2]
+    depth = 1.0 / cam.kappa if cam.kappa else cam.t[2]
+    return ScaledOrthoCamera(cam.name, cam.image_size, cam.s, t=[0.0, 0.0, depth], c=cam.c,
+                             kappa=cam.kappa)
+
+
 def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template="full",
           settings=None, init=None, max_size=960, progress=None, cancel=None, log=None,
           workers=1, blend_reach=BLEND_REACH, flips=None, camera_tilt=CAMERA_TILT_DEG,
-          pose_prior="default", dims=None):
+          pose_prior="default", dims=None, perspective=False):
     """Track a take with the differential tracker.
 
     Parameters
@@ -697,6 +721,9 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
         (:func:`initialize.initialize`).
     dims : dict, optional
         When ``init`` is not given: the performer's body lengths, kept instead of fitted.
+    perspective : bool
+        Uncalibrated, when ``init`` is not given: fit each view's perspective (views near the
+        body; :func:`initialize.initialize`) and track through it.
 
     Returns
     -------
@@ -714,8 +741,8 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
                                   for v in views},
                          template=template, calibrated=calibrated, views=views, flips=flips,
                          camera_tilt=camera_tilt, pose_prior=pose_prior, dims=dims,
-                         fit_dims=not dims)
-        for note in res.flip_notes():
+                         fit_dims=not dims, perspective=perspective)
+        for note in res.flip_notes() + ([res.distance_note()] if perspective else []):
             log(note)
         init = Initial(res.body, res.poses, res.cameras, getattr(res, "view_cameras", None),
                        list(getattr(res, "warnings", [])))
@@ -731,6 +758,10 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
         return [cams[v].scaled(factors[v], sampling="resize") if factors[v] != 1.0 else cams[v]
                 for v in views]
 
+    near = not calibrated and any(
+        getattr(cam, "kappa", 0.0) for cams in [init.cameras, *(init.view_cameras or {}).values()]
+        for cam in cams.values())
+
     def state_at(frame):
         pose = init.poses[frame]
         if calibrated:
@@ -740,9 +771,8 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
         roots, cams = [], []
         for v in views:
             cam = vc[v]
-            body2cam = se3.transform(cam.R, cam.t) @ pose.root
-            roots.append(body2cam)
-            cams.append(ScaledOrthoCamera(cam.name, cam.image_size, cam.s, c=cam.c))
+            roots.append(se3.transform(cam.R, cam.t) @ pose.root)
+            cams.append(_tracking_camera(cam, roots[-1], near))
         return State(np.stack(roots), pose.angles.copy(), working_cameras(dict(zip(views, cams))))
 
     tracker = DifferentialTracker(body, calibrated, settings)

@@ -608,3 +608,58 @@ def test_body_lengths_file_from_the_panel(blender, tmp_path):
     settings.dims_path = str(tmp_path / "gone.json")
     with pytest.raises(RuntimeError, match=r"Body Lengths From: .*gone\.json: no such file"):
         bpy.ops.zoopraxis.initialize()
+
+
+class _PanelLayout(_Layout):
+    """A UILayout for a whole panel: what ``_Layout`` does not record is accepted."""
+
+    def __getattr__(self, name):
+        return lambda *args, **options: self
+
+
+def test_near_cameras_from_the_panel(blender, monkeypatch):
+    """The Initialize step's "Near Cameras", offered while no view is calibrated, reaches the
+    one-view fit and the tracker's own initialization: the sample's cam0, 4.1 m from the
+    walker, gets a camera distance of that order (reported by Initialize) instead of none;
+    the remembered fit goes stale when it is set."""
+    import types
+
+    from zoopraxis.addon import pipeline
+    from zoopraxis.addon.panels import VIEW3D_PT_zoopraxis
+    from zoopraxis.core import initialize as core_init
+
+    def drawn():
+        log = []
+        VIEW3D_PT_zoopraxis.draw(types.SimpleNamespace(layout=_PanelLayout(log)), blender)
+        return ("prop", "near_cameras") in log
+
+    settings = load_sample(("cam0",))
+    bpy.ops.zoopraxis.import_markers(filepath=str(SAMPLE / "markers.json"))
+    assert drawn()
+    assert bpy.ops.zoopraxis.initialize() == {'FINISHED'}
+    assert remembered_initialization(blender).cameras["cam0"].kappa == 0.0
+    settings.near_cameras = True
+    assert remembered_initialization(blender) is None
+    assert bpy.ops.zoopraxis.initialize() == {'FINISHED'}
+    kappa = remembered_initialization(blender).cameras["cam0"].kappa
+    assert 2.0 < 1.0 / kappa < 8.0
+    assert f"camera distance (m): cam0 {1.0 / kappa:.1f}" in settings.status
+    # Track without a remembered fit initializes with the view's perspective too
+    asked = []
+    real = core_init.initialize
+
+    def spy(*args, **options):
+        asked.append(options.get("perspective"))
+        return real(*args, **options)
+
+    monkeypatch.setattr(core_init, "initialize", spy)
+    settings.use_frame_range = True
+    settings.frame_range_start, settings.frame_range_end = 0, 2
+    take = pipeline.gather(blender)
+    try:
+        result = pipeline.track(take)
+    finally:
+        take.close()
+    assert asked == [True] and list(result.frames) == [0, 1]
+    bpy.ops.zoopraxis.load_calibration(filepath=str(SAMPLE / "calibration.json"))
+    assert not drawn()

@@ -255,6 +255,43 @@ def test_uncalibrated_single_view(take):
     assert np.allclose(res.joints3d[0][0], 0.0, atol=1e-9)
 
 
+def _near_camera(cam, pose):
+    """The pinhole ``cam`` as a near ScaledOrthoCamera of a body-centred pose (``kappa`` the
+    inverse depth of the pose's root), and as the scaled orthographic camera of the same
+    scale."""
+    R = cam.R @ pose.root[:3, :3]
+    t = cam.R @ pose.root[:3, 3] + cam.t
+    near = ScaledOrthoCamera(cam.name, cam.image_size, s=cam.K[0, 0] / t[2], R=R, t=t,
+                             c=cam.K[:2, 2], kappa=1.0 / t[2])
+    return near, near.replace(kappa=0.0)
+
+
+def test_uncalibrated_near_view_tracks_through_its_perspective(take):
+    """One view 2.3 m from the walker, anchored at both ends: given its perspective
+    (``kappa``, as ``init --perspective`` fits it) the track follows the plate in pixels
+    better than through the same camera made scaled orthographic, blending between anchors
+    of two camera distances."""
+    scene, joints, body, poses = take
+    cam = scene.cameras[0]
+    plates = {cam.name: synth.ScenePlate(scene, 0)}
+    anchors = anchors_at(scene, joints, [0, N - 1])
+    for anchor in anchors:
+        anchor.views = {cam.name: anchor.views[cam.name]}
+    px = {}
+    for kind in (0, 1):
+        per_frame = {f: {cam.name: _near_camera(cam, poses[f])[kind]} for f in (0, N - 1)}
+        init = T.Initial(body, {f: Pose(np.eye(4), poses[f].angles.copy()) for f in (0, N - 1)},
+                         per_frame[0], per_frame)
+        res = T.track(plates, anchors, None, init=init, blend_reach=None)
+        px[kind] = np.linalg.norm(res.joints2d[cam.name] - cam.project(joints), axis=2)
+        assert np.allclose(res.joints3d[0][0], 0.0, atol=1e-9)
+    kappas = [_near_camera(cam, poses[f])[0].kappa for f in (0, N - 1)]
+    assert abs(kappas[0] - kappas[1]) > 1e-3
+    # the anchors themselves: 1-2 px through the perspective, 4 px without it
+    assert px[0][[0, N - 1]].mean() < 2.0 < 3.0 < px[1][[0, N - 1]].mean()
+    assert px[0].mean() < 0.6 * px[1].mean()
+
+
 def test_bad_input(take):
     scene, joints, body, poses = take
     cams = {c.name: c for c in scene.cameras}
@@ -285,6 +322,16 @@ def test_blend_states_interpolates():
     assert np.allclose(m.angles, 0.5)
     assert np.allclose(se3.log_se3(m.roots[0]), [0.1, 0, 0, 0, 0, 0.2])
     assert np.isclose(m.cameras[0].s, 20.0)
+
+
+def test_blend_states_interpolates_a_near_cameras_distance():
+    cams = [ScaledOrthoCamera("a", (10, 10), s=10.0, t=[0, 0, 2.0], kappa=0.5)]
+    a = T.State(np.eye(4)[None], np.zeros(3), cams)
+    b = T.State(np.eye(4)[None], np.ones(3), [cams[0].replace(s=40.0, kappa=0.25, t=[0, 0, 4])])
+    m = T.blend_states(a, b, 0.5)
+    assert np.isclose(m.cameras[0].s, 20.0) and np.isclose(m.cameras[0].kappa, 0.375)
+    # the centre stays at depth 0, where the renderer has a pinhole's
+    assert np.isclose(m.cameras[0].cam_from_world(m.cameras[0].center)[2], 0.0)
 
 
 def test_frame_status_from_silhouettes_and_residuals():
