@@ -137,6 +137,8 @@ def _blend_camera(a, b, w):
     if not (a.kappa or b.kappa):
         return a.replace(s=s)
     kappa = (1 - w) * a.kappa + w * b.kappa
+    if not kappa > 0.0:         # at the far one of a far and a near camera
+        return (b if w >= 0.5 else a).replace(s=s)
     return a.replace(s=s, kappa=kappa, t=[0.0, 0.0, 1.0 / kappa])
 
 

@@ -332,6 +332,12 @@ def test_blend_states_interpolates_a_near_cameras_distance():
     assert np.isclose(m.cameras[0].s, 20.0) and np.isclose(m.cameras[0].kappa, 0.375)
     # the centre stays at depth 0, where the renderer has a pinhole's
     assert np.isclose(m.cameras[0].cam_from_world(m.cameras[0].center)[2], 0.0)
+    # a camera fitted far (kappa 0) beside a near one: at its own end it is itself
+    far = T.State(np.eye(4)[None], np.ones(3), [cams[0].replace(kappa=0.0, t=[0, 0, 10.0])])
+    for w, kappa in ((0.0, 0.0), (0.5, 0.25), (1.0, 0.5)):
+        m = T.blend_states(far, a, w)
+        assert np.isclose(m.cameras[0].kappa, kappa)
+        assert m.cameras[0].t[2] == (10.0 if w == 0.0 else 1.0 / kappa)
 
 
 def test_frame_status_from_silhouettes_and_residuals():
