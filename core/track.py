@@ -667,19 +667,20 @@ def _run_in_processes(run, jobs, workers, progress, cancel, then=None):
     return results, cancelled or stop.is_set()
 
 
-def _tracking_camera(cam, body2cam, near):
-    """An uncalibrated view's camera as the tracker holds it: unrotated, the body's pose in the
-    camera frame (``body2cam``) carrying the rest. In a take with near cameras (``near``: some
-    ``kappa > 0``) the body is moved to the depth of the world origin (in place), where the
-    camera's scale ``s`` and perspective ``kappa`` are measured, and the camera's ``t_z``
-    keeps the depths it gives: a near camera has its centre at depth 0, where the renderer
-    puts a pinhole's. Far cameras of other takes are kept as they always were."""
+def _tracking_view(cam, body2world, near):
+    """An uncalibrated view as the tracker holds it: the body's pose in the camera frame and
+    the camera, unrotated. In a take with near cameras (``near``: some ``kappa > 0``) the body
+    is moved to the depth of the world origin, where the camera's scale ``s`` and perspective
+    ``kappa`` are measured, and the camera's ``t_z`` keeps the depths it gives: a near camera
+    has its centre at depth 0, where the renderer puts a pinhole's. Far cameras of other takes
+    are kept as they always were."""
+    body2cam = se3.transform(cam.R, cam.t) @ body2world
     if not near:
-        return ScaledOrthoCamera(cam.name, cam.image_size, cam.s, c=cam.c)
+        return body2cam, ScaledOrthoCamera(cam.name, cam.image_size, cam.s, c=cam.c)
     body2cam[2, 3] -= cam.t[2]
     depth = 1.0 / cam.kappa if cam.kappa else cam.t[2]
-    return ScaledOrthoCamera(cam.name, cam.image_size, cam.s, t=[0.0, 0.0, depth], c=cam.c,
-                             kappa=cam.kappa)
+    return body2cam, ScaledOrthoCamera(cam.name, cam.image_size, cam.s, t=[0.0, 0.0, depth],
+                                       c=cam.c, kappa=cam.kappa)
 
 
 def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template="full",
@@ -770,11 +771,7 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
             return State(np.stack([pose.root] * len(views)), pose.angles.copy(),
                          working_cameras(cameras))
         vc = (init.view_cameras or {}).get(frame, init.cameras)
-        roots, cams = [], []
-        for v in views:
-            cam = vc[v]
-            roots.append(se3.transform(cam.R, cam.t) @ pose.root)
-            cams.append(_tracking_camera(cam, roots[-1], near))
+        roots, cams = zip(*(_tracking_view(vc[v], pose.root, near) for v in views))
         return State(np.stack(roots), pose.angles.copy(), working_cameras(dict(zip(views, cams))))
 
     tracker = DifferentialTracker(body, calibrated, settings)
