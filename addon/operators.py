@@ -14,6 +14,7 @@ from bpy_extras.io_utils import ExportHelper, ImportHelper
 
 from ..core.errors import ZoopraxisError
 from .jobs import JobOperator, report_error
+from .props import NOTE_PREFIX
 
 
 def run(operator, context, work):
@@ -266,9 +267,13 @@ class ZOOPRAXIS_OT_initialize(JobOperator, bpy.types.Operator):
         for w in warnings:
             print(f"zoopraxis initialize: warning: {w}")
             self.report({'WARNING'}, w)
-        # What the panel shows: the warnings, and the frames whose depth the animator may
-        # judge by eye and flip.
-        settings.init_notes = "\n".join(warnings)
+        notes = list(getattr(init, "notes", []) or [])
+        for n in notes:
+            print(f"zoopraxis initialize: note: {n}")
+            self.report({'INFO'}, n)
+        # What the panel shows: the warnings and notes, and the frames whose depth the animator
+        # may judge by eye and flip.
+        settings.init_notes = "\n".join(warnings + [NOTE_PREFIX + n for n in notes])
         settings.one_view_frames = ",".join(
             str(a.frame) for a in self._take.anchors if a.frame in init.poses
             and sum(1 for v in a.views if a.joint_count(v)) == 1)

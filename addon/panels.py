@@ -9,6 +9,7 @@ import textwrap
 import bpy
 
 from ..core.joints import STANDARD_JOINTS
+from .props import NOTE_PREFIX
 
 # Characters of a warning per line in the sidebar (labels do not wrap).
 NOTE_WIDTH = 46
@@ -89,8 +90,10 @@ def _draw_init_notes(box, settings):
 
     for note in filter(None, settings.init_notes.split("\n")):
         col = box.column(align=True)
+        icon = 'INFO' if note.startswith(NOTE_PREFIX) else 'ERROR'
+        note = note.removeprefix(NOTE_PREFIX)
         for i, line in enumerate(textwrap.wrap(note, NOTE_WIDTH)):
-            col.label(text=line, icon='ERROR' if i == 0 else 'BLANK1')
+            col.label(text=line, icon=icon if i == 0 else 'BLANK1')
     frames = [int(f) for f in settings.one_view_frames.split(",") if f.strip().isdigit()]
     if not frames:
         return

@@ -12,6 +12,9 @@ from ..core.body import TEMPLATES
 from .preferences import TRACKERS
 from .retarget import PRESETS
 
+# Lines of ``init_notes`` that are notes (what the animator may do), not warnings.
+NOTE_PREFIX = "note: "
+
 
 def _sync_clip_start(settings):
     """Place every view's clip so take frame 0 shows at ``first_frame`` (plate frame = take
@@ -98,8 +101,10 @@ class ZOOPRAXIS_PG_settings(bpy.types.PropertyGroup):
     status: StringProperty(name="Status")
     progress: FloatProperty(name="Progress", min=0.0, max=1.0, subtype='FACTOR')
     initialized: BoolProperty(name="Initialized")
-    init_notes: StringProperty(name="Initialization Notes",
-                               description="Warnings of the last initialization, one a line")
+    init_notes: StringProperty(
+        name="Initialization Notes",
+        description="Warnings and notes of the last initialization, one a line (notes start "
+                    "with 'note: ')")
     one_view_frames: StringProperty(
         name="Frames Clicked in One View",
         description="Anchor frames of the last initialization clicked in one view only "

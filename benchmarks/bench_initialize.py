@@ -12,7 +12,9 @@ judging the fitted body by eye would make: the best of the five flips, or none. 
 animator's judgement added, not the automatic result the target is about. One view's rows take
 ONE_VIEW_TRIALS times as many poses as the others (their error varies most); the rows with the
 flip and without the prior are of the first of them only. A near view (720p at 4 m) is fitted
-both scaled orthographic and with its perspective (``init --perspective``).
+both scaled orthographic and with its perspective (``init --perspective``). How exact one
+view's lengths must be: CMU frames in one view with the true lengths kept, off by 0-5 %
+(``--only length-error``).
 
 Run: ``.venv/bin/python benchmarks/bench_initialize.py [--quick] [--only GROUP]``
 """
@@ -347,6 +349,41 @@ def one_view_anchors_cases(table, rng, n, apart=25):
     table.add(case, "proportions err %, 3 anchors", seg_together)
 
 
+def length_error_cases(table, rng, n, errors=(0.0, 0.01, 0.02, 0.05)):
+    """How exact one view's lengths must be: CMU frames in one view, as in the one-view CMU
+    row, fitted with the lengths fitted to the clicks (as shipped) and with the performer's
+    true lengths kept, each off by a random relative error of spread ``errors`` (independent
+    per length). The depth of a limb follows its length, so a few per cent cost what the whole
+    fit of the lengths costs."""
+    from zoopraxis.core import fit3d
+
+    if not CMU.is_dir():
+        return
+    fitted, kept, seg = [], {e: [] for e in errors}, []
+    for name in ("131_01", "131_03", "01_01"):
+        joints = cmu_joints(name)
+        true_dims = fit3d.dims_from_joints(joints[::30])
+        prior = init.PosePrior.load(exclude=[name])
+        for i in cmu_frames(len(joints), 2, n):
+            X = joints[i]
+            cam = ring(1, rng, FHD_100M, aim_at(X))
+            anchor = [Anchor(0, clicks(cam, X, rng))]
+            cameras = {cam[0].name: cam[0]}
+            result = init.initialize(anchor, cameras, calibrated=False, pose_prior=prior)
+            fitted.append(1000 * init.procrustes_mpjpe(result.joints3d(0), X))
+            seg.append(100 * segment_error(result.body, true_dims, proportions=True))
+            for e in errors:
+                dims = {k: v * (1.0 + rng.normal(0.0, e)) for k, v in true_dims.items()}
+                result = init.initialize(anchor, cameras, calibrated=False, pose_prior=prior,
+                                         dims=dims, fit_dims=False)
+                kept[e].append(1000 * init.procrustes_mpjpe(result.joints3d(0), X))
+    case = "CMU frames, 1 uncalibrated, 1080p @100m, lengths"
+    table.add(case, "PA-MPJPE mm (vs CMU joints), fitted", fitted, "<= 40")
+    table.add(case, "proportions err %, fitted", seg)
+    for e in errors:
+        table.add(case, f"PA-MPJPE mm, true lengths kept, {100 * e:g} % random error", kept[e])
+
+
 def near_view_cases(table, rng, n):
     """One uncalibrated view 4 m from the body (720p, a phone's field of view), fitted scaled
     orthographic (the default) and with each camera's perspective (``--perspective``), on the
@@ -505,7 +542,8 @@ def calibration_cases(table, rng):
 # alone with --only.
 OWN_STREAMS = {"known-lengths": (1, known_lengths_cases),
                "one-view-anchors": (2, one_view_anchors_cases),
-               "near-view": (3, near_view_cases)}
+               "near-view": (3, near_view_cases),
+               "length-error": (4, length_error_cases)}
 
 
 def main():

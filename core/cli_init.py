@@ -88,6 +88,8 @@ def main(argv):
         print(f"warning: {warning}")
     for note in result.flip_notes():
         print(note)
+    for note in result.notes:
+        print(f"note: {note}")
     if result.ambiguous:
         print("warning: the 3D pose is ambiguous (see above)")
     for frame, parts in sorted(result.ambiguous_parts.items()):

@@ -103,6 +103,19 @@ SIZE_PRIOR_SIGMA = {True: 0.12, False: 0.002}
 # In 3D inverse kinematics (starting points only) a prior spread costs this many metres.
 IK_PRIOR_M = 0.01
 
+# What a fit of the lengths to frames each clicked in one view adds to the result's notes. One
+# view sees a length only through its bone's foreshortening, and a limb's depth hangs on it.
+# Held-out CMU frames in one view, 1080p from afar, 2 px clicks (benchmarks/bench_initialize.py):
+# 51 mm off (Procrustes-aligned) with the lengths fitted to the clicks, 35 mm with the
+# performer's lengths from a three-view init kept. On 18 such frames: 60 mm fitted; 50 mm with
+# the lengths' prior centred on each performer's own proportions (lengths then within 5 %);
+# kept, the true lengths give 37 mm, with 1 % random error 39 mm, with 2 % 43 mm.
+ONE_VIEW_LENGTHS_NOTE = (
+    "the body lengths were fitted to frames each clicked in one view, which shows them poorly, "
+    "and the depth of the limbs depends on them: if this performer was clicked in several "
+    "views in another shot, keep the lengths fitted there (--dims-from, or Body Lengths From "
+    "in the add-on)")
+
 # Pairs whose clicks may be exchanged by mistake (subject's left and right).
 LR_PAIRS = tuple((f"l_{j}", f"r_{j}") for j in
                  ("shoulder", "elbow", "wrist", "hip", "knee", "ankle", "toe"))
@@ -1272,6 +1285,9 @@ class InitResult:
         the animator may flip (``initialize(..., flips=...)``) after judging the result by eye.
     flipped : dict of int to list of str
         The flips asked for and made, per anchor frame.
+    notes : list of str
+        One line each: what the animator may do for a better fit that is no fault of the
+        clicks (``ONE_VIEW_LENGTHS_NOTE``).
     """
 
     body: object
@@ -1286,6 +1302,7 @@ class InitResult:
     swapped: list = field(default_factory=list)
     ambiguous_parts: dict = field(default_factory=dict)
     flipped: dict = field(default_factory=dict)
+    notes: list = field(default_factory=list)
 
     def flip_notes(self):
         """One line per anchor frame where parts were flipped in depth."""
@@ -1334,6 +1351,7 @@ class InitResult:
             "ambiguous": bool(self.ambiguous),
             "ambiguous_parts": {str(f): list(p) for f, p in sorted(self.ambiguous_parts.items())},
             "flipped": {str(f): list(p) for f, p in sorted(self.flipped.items())},
+            "notes": list(self.notes),
         }
 
 
@@ -1377,7 +1395,8 @@ def init_from_json(data, path="init.json"):
                       ambiguous=bool(data.get("ambiguous", False)), calibrated=calibrated,
                       ambiguous_parts={int(f): list(p) for f, p in
                                        dict(data.get("ambiguous_parts", {})).items()},
-                      flipped={int(f): list(p) for f, p in dict(data.get("flipped", {})).items()})
+                      flipped={int(f): list(p) for f, p in dict(data.get("flipped", {})).items()},
+                      notes=[str(n) for n in data.get("notes", [])])
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1521,7 +1540,10 @@ def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None,
     fit.prior = None if pose_prior is None else \
         pose_prior.with_broad(kin.prior_mean, kin.prior_sigma)
     fit.flips = flips
-    return fit.run()
+    result = fit.run()
+    if fit_dims and all(_seen_twice(a, views) < _MIN_FRAME_JOINTS for a in anchors):
+        result.notes.append(ONE_VIEW_LENGTHS_NOTE)
+    return result
 
 
 def resolve_pose_prior(pose_prior, template):

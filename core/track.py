@@ -747,6 +747,8 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
                          fit_dims=not dims, perspective=perspective)
         for note in res.flip_notes() + ([res.distance_note()] if perspective else []):
             log(note)
+        for note in res.notes:
+            log(f"note: {note}")
         init = Initial(res.body, res.poses, res.cameras, getattr(res, "view_cameras", None),
                        list(getattr(res, "warnings", [])))
     for w in init.warnings:

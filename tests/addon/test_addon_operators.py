@@ -241,6 +241,7 @@ def test_initialize_operator_with_injected_worker(blender, monkeypatch):
         poses = {a.frame: full.rest_pose(np.eye(4)) for a in read_markers(SAMPLE / "markers.json")}
         rms = {"cam0": 1.5, "cam1": 2.5}
         warnings = ["a warning"]
+        notes = ["a note"]
         calibrated = True
 
     got = {}
@@ -253,6 +254,7 @@ def test_initialize_operator_with_injected_worker(blender, monkeypatch):
     assert bpy.ops.zoopraxis.initialize() == {'FINISHED'}
     assert set(got["cameras"]) == {"cam0", "cam1", "cam2"}
     assert settings.initialized and "click error up to 2.5 px" in settings.status
+    assert settings.init_notes.split("\n") == ["a warning", "note: a note"]
     assert settings.armature.name == "Zoopraxis init"
     take = pipeline.gather(blender)
     assert isinstance(pipeline.initial_for(blender.scene, take), Init)
@@ -461,11 +463,20 @@ def test_one_view_flips_in_depth_from_the_panel(blender):
     click undoes it."""
     from zoopraxis.addon import pipeline
     from zoopraxis.addon.panels import _draw_init_notes
+    from zoopraxis.core.initialize import ONE_VIEW_LENGTHS_NOTE
 
     settings = load_sample(("cam0",))
     bpy.ops.zoopraxis.import_markers(filepath=str(SAMPLE / "markers.json"))
     assert bpy.ops.zoopraxis.initialize() == {'FINISHED'}
     assert settings.one_view_frames == "0,47" and settings.depth_flips == ""
+    # The lengths are fitted to one view: the panel says how to do better, as a note.
+    assert "note: " + ONE_VIEW_LENGTHS_NOTE in settings.init_notes.split("\n")
+    log = []
+    _draw_init_notes(_Layout(log), settings)
+    labels = [entry for entry in log if entry[0] == "label"]
+    assert ("label", ONE_VIEW_LENGTHS_NOTE[:20], 'INFO') in \
+        [(kind, text[:20], icon) for kind, text, icon in labels]
+    assert not any(text.startswith("note: ") for _, text, _ in labels)
     take = pipeline.gather(blender)
     before = pipeline.initial_for(blender.scene, take)
     take.close()

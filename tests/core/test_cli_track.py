@@ -80,6 +80,7 @@ def test_track_one_view_with_a_limb_flipped_in_depth(take, tmp_path):
     assert run.returncode == 0, run.stderr
     assert "frame 0: flipped in depth: left leg" in run.stdout or \
         "the left leg lies across the view" in run.stdout
+    assert "note: the body lengths were fitted to frames each clicked in one view" in run.stdout
     assert result_io.read_result(out).mode == "uncalibrated"
 
 

@@ -264,6 +264,26 @@ def test_fixed_dims_are_kept(rng):
     assert mpjpe(result.joints3d(0), X) < 0.02
 
 
+def test_lengths_fitted_in_one_view_come_with_a_note(rng):
+    """Lengths fitted to anchor frames that are each clicked in one view (here in two different
+    calibrated views) get a note that points to the performer's lengths from several views;
+    lengths seen in two views at once, or kept, get none. The note survives init.json."""
+    body = synth.random_subject(rng)
+    cams = ring(2, rng)
+    views = {c.name: c for c in cams}
+    seen = [clicks(cams, body.joints(synth.everyday_pose(body, rng)), rng) for _ in range(2)]
+    apart = [Anchor(0, {cams[0].name: seen[0][cams[0].name]}),
+             Anchor(9, {cams[1].name: seen[1][cams[1].name]})]
+    result = init.initialize(apart, views)
+    assert result.notes == [init.ONE_VIEW_LENGTHS_NOTE]
+    assert "--dims-from" in result.notes[0] and "Body Lengths From" in result.notes[0]
+    assert init.init_from_json(json.loads(json.dumps(result.to_json()))).notes == result.notes
+    assert init.initialize([Anchor(0, seen[0]), apart[1]], views).notes == []
+    assert init.initialize(apart, views, dims=body.dims, fit_dims=False).notes == []
+    sizes = {c.name: c.image_size for c in cams}
+    assert init.initialize(apart[:1], sizes, calibrated=False).notes == result.notes
+
+
 # -- initialization: bad clicks and ambiguity ------------------------------------------------
 
 def test_swapped_knees_in_one_view_are_detected_and_named(rng):
@@ -810,6 +830,10 @@ def test_init_command_keeps_the_dims_of_an_earlier_init(tmp_path, capsys):
     assert all(kept[n] == pytest.approx(measured[n], abs=1e-5) for n in bm.LENGTH_DIMS)
     fitted = tmp_path / "fitted.json"
     assert cli.main(one + ["--out", str(fitted)]) == 0
+    # Fitted to one view's clicks, the lengths come with a note naming the remedy.
+    assert f"note: {init.ONE_VIEW_LENGTHS_NOTE}" in capsys.readouterr().out
+    assert json.loads(fitted.read_text())["notes"] == [init.ONE_VIEW_LENGTHS_NOTE]
+    assert json.loads(out.read_text())["notes"] == json.loads(three.read_text())["notes"] == []
     assert any(abs(json.loads(fitted.read_text())["dims"][n] - measured[n]) > 1e-3
                for n in bm.LENGTH_DIMS)
     capsys.readouterr()
