@@ -108,9 +108,10 @@ class ViewImages:
     foreground: np.ndarray = None
     sdf: list = None
     known: np.ndarray = None      # where the background model has seen the background
+    person: np.ndarray = None     # the foreground without cast shadows (what the body covers)
 
 
-def prepare_images(gray, levels, smooth_sigma, foreground=None, known=None):
+def prepare_images(gray, levels, smooth_sigma, foreground=None, known=None, person=None):
     """Pyramid, gradients and silhouette distance images of one frame of one view."""
     g = np.asarray(gray, np.float32)
     if smooth_sigma > 0:
@@ -127,7 +128,8 @@ def prepare_images(gray, levels, smooth_sigma, foreground=None, known=None):
             if level:
                 m = cv2.pyrDown(m)
             sdf.append(image_with_gradients(signed_distance(m > 0.5)))
-    return ViewImages(pyr, stacks, foreground, sdf, known)
+    return ViewImages(pyr, stacks, foreground, sdf, known,
+                      foreground if person is None else person)
 
 
 @dataclass
@@ -610,12 +612,14 @@ class DifferentialTracker:
             return state, report
         labels = [r.label for r in report.renders]
         known = [im.known for im in images_t1]
+        person = [None if d is None else (d < 0 if im.person is None else im.person)
+                  for d, im in zip(sdfs, images_t1)]
         unexplained = None      # per view, at ``state``: from the search when it ran
         # One view's silhouette leaves a limb's depth free (and scaled-orthographic views
         # fit perspective plates only roughly): the search needs two calibrated views.
         if (self.settings.limb_search and self.calibrated
                 and sum(d is not None for d in sdfs) >= 2):
-            angles, moved = self.search.search(state, sdfs, labels, known)
+            angles, moved = self.search.search(state, sdfs, labels, known, person)
             unexplained = self.search.last_unexplained
             if moved:
                 proposal = state.copy()
@@ -633,8 +637,8 @@ class DifferentialTracker:
                     unexplained = None
         report.limb_fit = self.search.fit(state, sdfs, labels)
         if unexplained is None:
-            unexplained = [None if d is None else unexplained_foreground(d < 0, lab, k)
-                           for d, lab, k in zip(sdfs, labels, known)]
+            unexplained = [None if p is None else unexplained_foreground(p, lab, k)
+                           for p, lab, k in zip(person, labels, known)]
         report.unexplained = np.array([
             np.nan if u is None else unexplained_share(u, lab)
             for u, lab in zip(unexplained, labels)])
@@ -733,7 +737,7 @@ class DifferentialTracker:
             if acc is not None and acc.inside.any():
                 residual[c] = 255.0 * np.mean(np.abs(acc.residual[acc.inside]))
             if images_t1[c].foreground is not None:
-                iou[c] = silhouette_iou(renders[c].label >= 0, images_t1[c].foreground)
+                iou[c] = silhouette_iou(renders[c].label >= 0, images_t1[c].person)
                 coverage[c] = model_coverage(renders[c].label >= 0, images_t1[c].foreground)
         return state, StepReport(residual, iou, cost, total_iters, renders, coverage)
 

@@ -55,7 +55,7 @@ from .particle import ParticleFilter
 from .plates import to_gray_float
 from .track import (BLEND_REACH, Cancelled, FrameSource, Initial, blend_report, blend_states,
                     blend_weights, check_take, extend_passes, make_result, plan_passes,
-                    silhouette_measures, take_backgrounds)
+                    remeasure, silhouette_measures, take_backgrounds, tracked_backgrounds)
 
 TRACKERS = ("particle", "hybrid")
 PRIORS = ("smooth", "walk")
@@ -357,12 +357,16 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
         diff, source, views, frames, inside, state_at, log)
 
     def masks(colour):
-        return [backgrounds[c].foreground(img) if use_bg[c] else None
-                for c, img in enumerate(colour)]
+        """Each view's foreground and the same without cast shadows (None: no background)."""
+        fg = [backgrounds[c].foreground(img) if use_bg[c] else None
+              for c, img in enumerate(colour)]
+        return fg, [None if m is None else backgrounds[c].person(img, m)
+                    for c, (img, m) in enumerate(zip(colour, fg))]
 
     def images(colour, fg):
         return [prepare_images(to_gray_float(img), settings.levels, settings.smooth_sigma,
-                               fg[c]) for c, img in enumerate(colour)]
+                               fg[0][c], backgrounds[c].known if use_bg[c] else None, fg[1][c])
+                for c, img in enumerate(colour)]
 
     def make_prior():
         if prior == "walk":
@@ -402,7 +406,7 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
         pf = ParticleFilter(body, work_cams, make_prior(), n_particles=particles,
                             seed=next(seeds), layers=layers, silhouette=silhouette)
         first = pf.start(colour, st.pose(0))
-        pf.likelihood.set_foreground(fg)
+        pf.likelihood.set_foreground(fg[1])
         reference = covered_at(pf, st.pose(0))
         yield start, (st, None, first.spread, "ok", first.ess, reference)
         for f in range(start + step, stop + step, step):
@@ -411,7 +415,7 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
             colour = source.colour(f)
             fg = masks(colour)
             ims1 = images(colour, fg)
-            fs = pf.step(colour, fg)
+            fs = pf.step(colour, fg[1])
             diff.anchor_terms = anchor_terms
             if tracker == "particle":
                 new = state_of(fs.pose)
@@ -497,6 +501,13 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
         log("cancelled: keeping the frames tracked so far")
     for a in anchor_frames:
         tracked.setdefault(a, (state_at(a), None, None, "ok", float(particles), np.nan))
+    if not cancelled and any(use_bg):
+        # each frame's status against backgrounds with the tracked body kept out of them
+        states = {f: item[0] for f, item in tracked.items()}
+        ref_fit, ref_iou, ref_unexplained = remeasure(
+            diff, source, states, {f: item[1] for f, item in tracked.items()}, anchor_frames,
+            tracked_backgrounds(diff, source, views, frames, states, use_bg), use_bg,
+            limbs=True)
 
     result = make_result(body, views, plates, factors,
                           {f: item[0] for f, item in tracked.items()},

@@ -293,7 +293,7 @@ class LimbSearch:
             return total / max(used, 1), total_plain / max(used, 1)
         return total / max(used, 1)
 
-    def search(self, state, sdfs, rest_labels, known=None):
+    def search(self, state, sdfs, rest_labels, known=None, person=None):
         """Best pose of each limb in turn; returns the new angles and the limbs that moved.
 
         Parameters
@@ -305,6 +305,9 @@ class LimbSearch:
             The model's support map at ``state`` per view (segment labels, -1 background).
         known : list of array of bool (H, W) or None, optional
             Where each view's background model has seen the background.
+        person : list of array of bool (H, W) or None, optional
+            The foreground without cast shadows, where a limb may be drawn to (default: the
+            foreground of ``sdfs``).
 
         Returns
         -------
@@ -317,9 +320,10 @@ class LimbSearch:
         self.last_scores = {}
         plain_scores = {}
         known = known or [None] * len(sdfs)
+        person = person or [None] * len(sdfs)
         unexplained = [None if d is None or lab is None else
-                       unexplained_foreground(d < 0, lab, k)
-                       for d, lab, k in zip(sdfs, rest_labels, known)]
+                       unexplained_foreground(d < 0 if p is None else p, lab, k)
+                       for d, lab, k, p in zip(sdfs, rest_labels, known, person)]
         self.last_unexplained = unexplained     # of the pose searched from, for the caller
         for group in self.groups:
             rest = _rest_of_body(rest_labels, group)

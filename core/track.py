@@ -314,11 +314,10 @@ def take_backgrounds(tracker, source, views, frames, inside, state_at, log):
     the anchors keeps the person out of it; a view whose foreground does not cover the model at
     the first anchor goes without silhouettes.
     """
-    sample_frames = np.unique(np.linspace(frames.start, frames.stop - 1,
-                                          min(25, len(frames))).astype(int))
-    log(f"background: {len(sample_frames)} frames per view")
+    sample = sample_frames(frames)
+    log(f"background: {len(sample)} frames per view")
     per_view = [[] for _ in views]
-    for f in sample_frames:
+    for f in sample:
         for c, img in enumerate(source.colour(int(f))):
             per_view[c].append(img)
     exclude = [[] for _ in views]
@@ -350,16 +349,73 @@ def take_backgrounds(tracker, source, views, frames, inside, state_at, log):
                 f"(covers {cov:.0%} of the body); silhouettes off")
             continue
         fg = bg.foreground(colour0[c])
+        person = bg.person(colour0[c], fg)
         ref_fit[c] = model_coverage(r0[c].label >= 0, fg)
-        ref_iou[c] = max(silhouette_iou(r0[c].label >= 0, fg), 0.05)
+        ref_iou[c] = max(silhouette_iou(r0[c].label >= 0, person), 0.05)
         if ref_fit[c] < MIN_ANCHOR_FIT:
             use_bg[c] = False
             log(f"view '{views[c]}': only {ref_fit[c]:.0%} of the model lies in the "
                 "foreground at the anchor; silhouettes off")
             ref_fit[c] = ref_iou[c] = np.nan
             continue
-        ref_unexplained[c] = unexplained_fraction(fg, r0[c].label, bg.known)
+        ref_unexplained[c] = unexplained_fraction(person, r0[c].label, bg.known)
     return backgrounds, use_bg, ref_fit, ref_iou, ref_unexplained
+
+
+def sample_frames(frames):
+    """The frames spread over the take that the background models are estimated from."""
+    return np.unique(np.linspace(frames.start, frames.stop - 1,
+                                 min(25, len(frames))).astype(int))
+
+
+def tracked_backgrounds(tracker, source, views, frames, states, use_bg):
+    """Background models estimated again with the tracked body kept out of them.
+
+    The first estimate knows where the person is at the anchor frames only; a person who
+    stands still for a third of the take or more (a crouch before a jump, a turn on the spot)
+    is taken for background there, and the foreground loses them. With the tracked poses,
+    every sampled frame's (dilated) model silhouette is kept out.
+
+    Returns
+    -------
+    list of BackgroundModel or None
+        Per view; None where the view's background is not used.
+    """
+    sample = [int(f) for f in sample_frames(frames) if int(f) in states]
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (9, 9))
+    per_view = [[] for _ in views]
+    masks = [[] for _ in views]
+    for f in sample:
+        renders = tracker.render_views(states[f], want=())
+        for c, img in enumerate(source.colour(f)):
+            per_view[c].append(img)
+            masks[c].append(cv2.dilate((renders[c].label >= 0).astype(np.uint8), kernel) > 0)
+    return list(thread_pool("views", 2).map(
+        lambda c: estimate_background(per_view[c], masks=np.stack(masks[c]))
+        if use_bg[c] and len(sample) >= 5 else None, range(len(views))))
+
+
+def remeasure(tracker, source, states, reports, anchor_frames, backgrounds, use_bg, limbs):
+    """The silhouette measures of every tracked frame and of the first anchor against new
+    background models (:func:`tracked_backgrounds`), in place of the reports' own.
+
+    Returns
+    -------
+    ref_fit, ref_iou, ref_unexplained : array, shape (V,)
+        The first anchor's, the references of the frames' status.
+    """
+    a0 = anchor_frames[0]
+    usable = [u and bg is not None for u, bg in zip(use_bg, backgrounds)]
+    fit, iou, unexplained, _ = silhouette_measures(tracker, states[a0], source.colour(a0),
+                                                   backgrounds, usable)
+    for f, rep in reports.items():
+        if rep is None or f in anchor_frames:
+            continue
+        rep.coverage, rep.iou, rep.unexplained, limb_fit = silhouette_measures(
+            tracker, states[f], source.colour(f), backgrounds, usable, limbs=limbs)
+        if limb_fit is not None:
+            rep.limb_fit = limb_fit
+    return fit, np.maximum(iou, 0.05), unexplained
 
 
 def unexplained_fraction(foreground, labels, known=None):
@@ -391,9 +447,11 @@ def silhouette_measures(tracker, state, colours, backgrounds, use_bg, limbs=Fals
     for c, img in enumerate(colours):
         if use_bg[c]:
             fg = backgrounds[c].foreground(img)
+            person = backgrounds[c].person(img, fg)
             fit[c] = model_coverage(renders[c].label >= 0, fg)
-            iou[c] = silhouette_iou(renders[c].label >= 0, fg)
-            unexplained[c] = unexplained_fraction(fg, renders[c].label, backgrounds[c].known)
+            iou[c] = silhouette_iou(renders[c].label >= 0, person)
+            unexplained[c] = unexplained_fraction(person, renders[c].label,
+                                                  backgrounds[c].known)
             if limbs:
                 sdfs[c] = signed_distance(fg)
     if not limbs or tracker.search is None or sum(d is not None for d in sdfs) < 2:
@@ -753,6 +811,9 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
                        list(getattr(res, "warnings", [])))
     for w in init.warnings:
         log(f"warning: {w}")
+    if len(views) == 1:
+        log("note: one view does not measure the depth of the limbs; the frames between "
+            "anchors are reported uncertain at best")
     body = init.body
 
     # Working resolution and cameras
@@ -787,20 +848,21 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
         colours = source.colour(frame)
 
         def one(c):
-            fg = backgrounds[c].foreground(colours[c]) if use_bg[c] else None
+            if not use_bg[c]:
+                return prepare_images(to_gray_float(colours[c]), settings.levels,
+                                      settings.smooth_sigma)
+            fg = backgrounds[c].foreground(colours[c])
             return prepare_images(to_gray_float(colours[c]), settings.levels,
-                                  settings.smooth_sigma, fg,
-                                  backgrounds[c].known if use_bg[c] else None)
+                                  settings.smooth_sigma, fg, backgrounds[c].known,
+                                  backgrounds[c].person(colours[c], fg))
 
         return tracker.map_views(one, len(colours))
 
     anchor_frames = [a.frame for a in inside]
-    passes, total = plan_passes(anchor_frames, frames, blend_reach)
+    passes, first_total = plan_passes(anchor_frames, frames, blend_reach)
+    total = first_total
 
-    states, reports = {}, {}
-    for a in anchor_frames:
-        states[a] = state_at(a)
-        reports[a] = None
+    anchor_states = {a: state_at(a) for a in anchor_frames}
 
     spare_core = True
 
@@ -854,114 +916,145 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
         return silhouette_measures(tracker, state, source.colour(frame), backgrounds, use_bg,
                                    limbs=calibrated)
 
-    # First the single passes and, between two anchors, each pass up to a little past the
-    # middle; as soon as both of a pair are done, a pass whose partner lost the body on the
-    # way goes on towards it.
-    pairs = {(a, b): st for a, b, st in passes if st is not None}
-    jobs = [(a, b) for a, b, st in passes if st is None]
-    part_of = {}        # job -> the pass (from anchor, to anchor) it belongs to
-    for (a, b), (lo, hi) in pairs.items():
-        if lo <= hi:        # adjacent anchors have nothing between them
-            jobs += [(a, hi), (b, lo)]
-            part_of[(a, hi)], part_of[(b, lo)] = (a, b), (b, a)
-    tracked = {(a, b): {} for a, b, _ in passes}    # pass -> frame -> (state, report)
-    tracked.update({(b, a): {} for a, b in pairs})
-    running = {pair: 2 for pair, (lo, hi) in pairs.items() if lo <= hi}  # jobs of a pair
-    blends = {}         # pair -> [(frame, weight, blended state)]
-    measured = {}       # frame -> silhouette_measures of its blended pose
+    def run_passes(round_index, rounds, before=0):
+        """Track every pass of the take with the current background models (round
+        ``round_index`` of ``rounds``, after ``before`` frames tracked in earlier rounds: for
+        progress); returns the states and reports of every frame tracked and whether a cancel
+        stopped it."""
+        nonlocal spare_core, total
+        total = first_total
+        states, reports = dict(anchor_states), dict.fromkeys(anchor_frames)
+        # First the single passes and, between two anchors, each pass up to a little past the
+        # middle; as soon as both of a pair are done, a pass whose partner lost the body on the
+        # way goes on towards it.
+        pairs = {(a, b): st for a, b, st in passes if st is not None}
+        jobs = [(a, b) for a, b, st in passes if st is None]
+        part_of = {}        # job -> the pass (from anchor, to anchor) it belongs to
+        for (a, b), (lo, hi) in pairs.items():
+            if lo <= hi:        # adjacent anchors have nothing between them
+                jobs += [(a, hi), (b, lo)]
+                part_of[(a, hi)], part_of[(b, lo)] = (a, b), (b, a)
+        tracked = {(a, b): {} for a, b, _ in passes}    # pass -> frame -> (state, report)
+        tracked.update({(b, a): {} for a, b in pairs})
+        running = {pair: 2 for pair, (lo, hi) in pairs.items() if lo <= hi}  # jobs of a pair
+        blends = {}         # pair -> [(frame, weight, blended state)]
+        measured = {}       # frame -> silhouette_measures of its blended pose
 
-    def blend(a, b):
-        """The blended frames of the pair ``a < b`` (both passes done), made once."""
-        if (a, b) not in blends:
-            fwd, bwd = tracked[(a, b)], tracked[(b, a)]
-            both = [f for f in range(a + 1, b) if f in fwd and f in bwd]
-            weights = blend_weights([fwd[f][1] for f in both], [bwd[f][1] for f in both])
-            blends[(a, b)] = [(f, w, blend_states(fwd[f][0], bwd[f][0], w))
-                              for f, w in zip(both, weights)]
-        return blends[(a, b)]
+        def blend(a, b):
+            """The blended frames of the pair ``a < b`` (both passes done), made once."""
+            if (a, b) not in blends:
+                fwd, bwd = tracked[(a, b)], tracked[(b, a)]
+                both = [f for f in range(a + 1, b) if f in fwd and f in bwd]
+                weights = blend_weights([fwd[f][1] for f in both], [bwd[f][1] for f in both])
+                blends[(a, b)] = [(f, w, blend_states(fwd[f][0], bwd[f][0], w))
+                                  for f, w in zip(both, weights)]
+            return blends[(a, b)]
 
-    def then(job, out):
-        nonlocal total
-        if isinstance(job, _Measure):
-            measured.update(out)
-            return []
-        tracked[part_of.get(job, job[:2])].update(out)
-        pair = part_of.get(job)
-        if pair is None:
-            return []
-        a, b = min(pair), max(pair)
-        running[(a, b)] -= 1
-        more = []
-        if len(job) == 2 and running[(a, b)] == 1:
-            return []       # the other pass is still running
-        if len(job) == 2:
-            lo, hi = pairs[(a, b)]
-            fwd, bwd = tracked[(a, b)], tracked[(b, a)]
-            to_f, to_b = extend_passes({f: r for f, (_, r) in fwd.items()},
-                                       {f: r for f, (_, r) in bwd.items()}, lo, hi,
-                                       blend_reach)
-            for (start, stop), part, at, to in (((a, b), fwd, hi, to_f),
-                                                ((b, a), bwd, lo, to_b)):
-                if to != at:
-                    step = 1 if stop > start else -1
-                    before = part[at - step][0] if at - step != start else state_at(start)
-                    job = (start, to, _Resume(at, before, part[at][0]))
-                    part_of[job] = (start, stop)
-                    more.append(job)
-                    total += abs(to - at)
-            if more:
-                log(f"frames {a}-{b}: {len(more)} pass{'es go' if len(more) > 1 else ' goes'} "
-                    "on where the other lost the body")
-                running[(a, b)] += len(more)
-        if running[(a, b)] == 0:
-            # Both passes are done: the blended poses' silhouettes are measured in the
-            # workers, in as many parts as there are workers, while other passes run.
-            frames_b = [(f, st) for f, _, st in blend(a, b)]
-            for k in range(processes):
-                share = frames_b[k::processes]
-                if share:
-                    more.append(_Measure([f for f, _ in share], [st for _, st in share]))
-        return more
-
-    def counted(n):
-        if progress is not None:
-            progress(n, total)
-
-    # longest first: even out the workers
-    jobs.sort(key=lambda job: -abs(job[1] - job[0]))
-    processes = 1
-    if workers > 1 and len(jobs) > 1 and _can_fork():
-        processes = min(workers, len(jobs))
-        log(f"tracking {len(jobs)} passes in {processes} processes")
-        spare_core = processes < default_cores()
-        results, cancelled = _run_in_processes(run, jobs, processes, counted, cancel, then)
-    else:
-        results, cancelled = _run_in_turn(run, jobs, counted, cancel, then)
-    if cancelled:
-        # what the passes tracked and measured before the cancel reached them
-        for job, out in results.items():
+        def then(job, out):
+            nonlocal total
             if isinstance(job, _Measure):
                 measured.update(out)
-            else:
-                tracked[part_of.get(job, job[:2])].update(out)
+                return []
+            tracked[part_of.get(job, job[:2])].update(out)
+            pair = part_of.get(job)
+            if pair is None:
+                return []
+            a, b = min(pair), max(pair)
+            running[(a, b)] -= 1
+            more = []
+            if len(job) == 2 and running[(a, b)] == 1:
+                return []       # the other pass is still running
+            if len(job) == 2:
+                lo, hi = pairs[(a, b)]
+                fwd, bwd = tracked[(a, b)], tracked[(b, a)]
+                to_f, to_b = extend_passes({f: r for f, (_, r) in fwd.items()},
+                                           {f: r for f, (_, r) in bwd.items()}, lo, hi,
+                                           blend_reach)
+                for (start, stop), part, at, to in (((a, b), fwd, hi, to_f),
+                                                    ((b, a), bwd, lo, to_b)):
+                    if to != at:
+                        step = 1 if stop > start else -1
+                        before = part[at - step][0] if at - step != start else state_at(start)
+                        job = (start, to, _Resume(at, before, part[at][0]))
+                        part_of[job] = (start, stop)
+                        more.append(job)
+                        total += abs(to - at)
+                if more:
+                    log(f"frames {a}-{b}: {len(more)} pass{'es go' if len(more) > 1 else ' goes'} "
+                        "on where the other lost the body")
+                    running[(a, b)] += len(more)
+            if running[(a, b)] == 0:
+                # Both passes are done: the blended poses' silhouettes are measured in the
+                # workers, in as many parts as there are workers, while other passes run.
+                frames_b = [(f, st) for f, _, st in blend(a, b)]
+                for k in range(processes):
+                    share = frames_b[k::processes]
+                    if share:
+                        more.append(_Measure([f for f, _ in share], [st for _, st in share]))
+            return more
 
-    for a, b, stretch in passes:
-        fwd, bwd = tracked[(a, b)], tracked.get((b, a), {})
-        inner = range(a + 1, b)
-        both = [f for f in inner if f in fwd and f in bwd]
-        if stretch is not None and both and all(f in fwd or f in bwd for f in inner):
-            for f, w, state in blend(a, b):
-                states[f] = state
-                # measured by a worker, or here (a cancel stopped the measuring jobs)
-                fit = measured.get(f) or blended_fit(state, f)
-                reports[f] = blend_report(fwd[f][1], bwd[f][1], w, fit)
-        # frames only one pass tracked (or a pair cut short by a cancel): keep them all
-        for part in (fwd, bwd):
-            for f, (st, rep) in part.items():
-                if f not in states:
-                    states[f], reports[f] = st, rep
+        def counted(n):
+            if progress is not None:
+                progress(before + n, before + total + (rounds - 1 - round_index) * first_total)
+
+        # longest first: even out the workers
+        jobs.sort(key=lambda job: -abs(job[1] - job[0]))
+        processes = 1
+        if workers > 1 and len(jobs) > 1 and _can_fork():
+            processes = min(workers, len(jobs))
+            log(f"tracking {len(jobs)} passes in {processes} processes")
+            spare_core = processes < default_cores()
+            results, cancelled = _run_in_processes(run, jobs, processes, counted, cancel, then)
+        else:
+            results, cancelled = _run_in_turn(run, jobs, counted, cancel, then)
+        if cancelled:
+            # what the passes tracked and measured before the cancel reached them
+            for job, out in results.items():
+                if isinstance(job, _Measure):
+                    measured.update(out)
+                else:
+                    tracked[part_of.get(job, job[:2])].update(out)
+
+        for a, b, stretch in passes:
+            fwd, bwd = tracked[(a, b)], tracked.get((b, a), {})
+            inner = range(a + 1, b)
+            both = [f for f in inner if f in fwd and f in bwd]
+            if stretch is not None and both and all(f in fwd or f in bwd for f in inner):
+                for f, w, state in blend(a, b):
+                    states[f] = state
+                    # measured by a worker, or here (a cancel stopped the measuring jobs)
+                    fit = measured.get(f) or blended_fit(state, f)
+                    reports[f] = blend_report(fwd[f][1], bwd[f][1], w, fit)
+            # frames only one pass tracked (or a pair cut short by a cancel): keep them all
+            for part in (fwd, bwd):
+                for f, (st, rep) in part.items():
+                    if f not in states:
+                        states[f], reports[f] = st, rep
+        return states, reports, cancelled
+
+    # Two rounds where the silhouettes are used: the first backgrounds know where the person
+    # is at the anchors only, and take a person who stood still for a while for background
+    # there; the first round's track keeps the body out of the second round's backgrounds.
+    rounds = 2 if any(use_bg) else 1
+    states, reports, cancelled = run_passes(0, rounds)
+    refined = None
     if cancelled:
         log("cancelled: keeping the frames tracked so far")
+    elif rounds == 2:
+        refined = tracked_backgrounds(tracker, source, views, frames, states, use_bg)
+        log("background: estimated again with the tracked body kept out of it; tracking again")
+        first = states, reports
+        backgrounds = [r if r is not None else b for r, b in zip(refined, backgrounds)]
+        states, reports, cancelled = run_passes(1, rounds, before=total)
+        if cancelled:
+            log("cancelled: keeping the first round's track")
+            states, reports = first
+        else:
+            refined = tracked_backgrounds(tracker, source, views, frames, states, use_bg)
+    if refined is not None:
+        # each frame's status against the backgrounds without the person in them
+        ref_fit, ref_iou, ref_unexplained = remeasure(
+            tracker, source, states, reports, anchor_frames, refined, use_bg, limbs=calibrated)
 
     return make_result(body, views, plates, factors, states, reports, calibrated, init,
                         anchor_frames, frames, cancelled, ref_fit, ref_iou, ref_unexplained)
@@ -1022,8 +1115,11 @@ def make_result(body, views, plates, factors, states, reports, calibrated, init,
         if f in anchor_frames:
             status.append("ok")
             continue
-        status.append(frame_status(fit[i] / ref_fit, iou[i] / ref_iou, res_all[i].max() / med,
-                                   limb_fit[i], unexplained[i] - ref_unexplained))
+        verdict = frame_status(fit[i] / ref_fit, iou[i] / ref_iou, res_all[i].max() / med,
+                               limb_fit[i], unexplained[i] - ref_unexplained)
+        # One view does not measure how far a limb reaches towards or away from it: a pose
+        # whose outline fits may still be wrong in depth by 20 cm or more.
+        status.append("uncertain" if verdict == "ok" and len(views) == 1 else verdict)
     fps = plates[views[0]].fps or 30.0
     body_info = {"template": body.template, "shapes": body.shapes,
                  "dims": {k: round(v, 5) for k, v in body.dims.items()},

@@ -81,3 +81,69 @@ def test_median_over_frames_is_numpys(n):
     odd[0, 0, 0, 0] = np.nan
     odd[1, 1, 1, 1] = -0.5
     np.testing.assert_array_equal(bg._median_over_frames(odd), np.median(odd, axis=0))
+
+
+def shadow_scene(seed=0, size=(96, 72)):
+    """A textured floor, the same floor with a cast shadow (dimmed to 55 %, slightly bluer
+    light), a red block (clothes), and a near-black block (dark clothes)."""
+    rng = np.random.default_rng(seed)
+    W, H = size
+    base = np.array([90, 120, 150], float)          # BGR: a beige floor
+    back = np.clip(base * rng.uniform(0.7, 1.3, (H, W, 1)), 0, 255)
+    frame = back.copy()
+    shadow = np.zeros((H, W), bool)
+    shadow[40:64, 5:60] = True
+    frame[shadow] = back[shadow] * [0.6, 0.55, 0.52]
+    clothes = np.zeros((H, W), bool)
+    clothes[8:36, 30:50] = True
+    frame[clothes] = [40, 40, 170]
+    dark = np.zeros((H, W), bool)
+    dark[8:36, 60:80] = True
+    frame[dark] = [14, 15, 16]
+    noisy = [np.clip(back + rng.normal(0, 2, back.shape), 0, 255).astype(np.uint8)
+             for _ in range(6)]
+    frame = np.clip(frame + rng.normal(0, 2, frame.shape), 0, 255).astype(np.uint8)
+    return noisy, frame, shadow, clothes, dark
+
+
+def test_shadow_is_the_background_dimmed_not_clothes():
+    frames, frame, shadow, clothes, dark = shadow_scene()
+    model = bg.estimate_background(frames)
+    fg = model.foreground(frame)
+    # the foreground holds the shadow: a plain difference cannot tell it from the body
+    assert fg[shadow].mean() > 0.9
+    found = model.shadow(frame)
+    inner = shadow.copy()
+    inner[[40, 63], :] = False
+    assert found[inner].mean() > 0.9
+    assert found[clothes].mean() < 0.05
+    assert found[dark].mean() < 0.02          # darker than any shadow the light leaves
+    person = model.person(frame, fg)
+    assert person[clothes].mean() > 0.9 and person[dark].mean() > 0.9
+    assert person[shadow].mean() < 0.1
+
+
+def test_tracked_masks_keep_a_person_who_stood_still_out_of_the_background():
+    rng = np.random.default_rng(5)
+    W, H = 64, 48
+    back = rng.integers(0, 256, (H, W, 3)).astype(np.uint8)
+    person = rng.integers(0, 256, (30, 14, 3)).astype(np.uint8)
+    frames, masks = [], []
+    for f in range(15):
+        frame = np.clip(back + rng.normal(0, 2, back.shape), 0, 255).astype(np.uint8)
+        mask = np.zeros((H, W), bool)
+        x = 25 if 3 <= f < 12 else 4 + 3 * f % 40      # still for 9 of 15 frames
+        mask[10:40, x:x + 14] = True
+        frame[mask] = person.reshape(-1, 3)
+        frames.append(frame)
+        masks.append(mask)
+    still = np.zeros((H, W), bool)
+    still[10:40, 25:39] = True
+    truth = back[still].astype(float) / 255
+    plain = bg.estimate_background(frames)
+    tracked = bg.estimate_background(frames, masks=np.stack(masks))
+    # the person's own colours win the plain estimate where they stood
+    assert np.abs(plain.image[still] - truth).max(axis=1).mean() > 0.2
+    assert np.abs(tracked.image[still] - truth).max(axis=1).mean() < 0.03
+    assert tracked.foreground(frames[6])[still].mean() > 0.9
+    assert plain.foreground(frames[6])[still].mean() < 0.2

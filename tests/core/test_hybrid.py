@@ -89,14 +89,16 @@ def test_hybrid_tracks_a_brisk_walk(brisk, brisk_runs):
         assert np.all(res.residual[c.name][1:] > 0)
 
 
-def test_hybrid_beats_the_differential_tracker_on_fast_motion(brisk, brisk_runs):
+def test_hybrid_follows_fast_motion_as_well_as_the_differential_tracker(brisk, brisk_runs):
     scene, joints, body, poses = brisk
     alone = mpjpe(brisk_runs["differential"], joints)
     guided = mpjpe(brisk_runs["hybrid"], joints)
-    # The differential tracker alone loses the swinging leg for a while (over 10 cm off; its
-    # silhouette search finds it again later).
-    assert alone.max() > 0.1
-    assert guided.mean() < 0.4 * alone.mean() and guided.max() < 0.5 * alone.max()
+    # The differential tracker's second round, with backgrounds that keep its first round's
+    # body out, and its silhouette search follow the swinging leg too (it was over 10 cm off
+    # with the first round's backgrounds alone): 3.3 cm on average, 4.8 at worst; the
+    # hybrid's coarse search 2.8 and 4.3.
+    assert alone.max() < 0.06
+    assert guided.mean() < 1.1 * alone.mean() and guided.max() < 0.06
 
 
 def test_the_same_seed_gives_the_same_track(slow):

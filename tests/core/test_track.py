@@ -53,7 +53,9 @@ def test_tracks_a_short_walk(take):
         assert px < 4.0
         assert res.residual[c.name].shape == (N,) and np.all(res.residual[c.name][1:] > 0)
     assert res.status[0] == "ok" and set(res.status) <= {"ok", "uncertain", "lost"}
-    assert calls[-1] == (N - 1, N - 1)
+    # two rounds: the second with backgrounds that keep the first round's body out
+    assert calls[-1] == (2 * (N - 1), 2 * (N - 1))
+    assert all(b[0] >= a[0] and b[1] == calls[0][1] for a, b in zip(calls, calls[1:]))
     assert res.angles.shape == (N, body.n_dofs) and res.roots.shape == (N, 4, 4)
 
 
@@ -182,17 +184,19 @@ def test_passes_in_worker_processes_give_the_same_track(take, monkeypatch):
         res[w] = T.track(frozen, anchors, cams, init=init, workers=w,
                          progress=lambda d, t, w=w: calls[w].append((d, t)))
         here[w] = len(measured_here)
-    # the blended frames 1, 2, 4, 5: measured in the parent when in turn, in the workers else
-    assert here == {1: 4, 2: 0}
+    # the blended frames 1, 2, 4, 5 of each round: measured in the parent when in turn, in
+    # the workers else; the first anchor and the five frames between anchors are measured
+    # again in the parent against the backgrounds that keep the tracked body out
+    assert here == {1: 2 * 4 + 6, 2: 6}
     assert list(res[2].frames) == list(range(N))
     assert np.array_equal(res[1].angles, res[2].angles)
     assert np.array_equal(res[1].roots, res[2].roots)
     assert res[1].status == res[2].status
     for key in ("silhouette_fit", "silhouette_iou", "unexplained", "limb_fit"):
         assert repr(res[1].extra[key]) == repr(res[2].extra[key]), key
-    # 2 + 2 + 2 + 2 + 1 frames tracked (blended stretches twice, the anchors not again),
-    # all reported
-    assert calls[1][-1] == calls[2][-1] == (9, 9)
+    # 2 + 2 + 2 + 2 + 1 frames tracked (blended stretches twice, the anchors not again)
+    # in each of two rounds, all reported
+    assert calls[1][-1] == calls[2][-1] == (18, 18)
 
 
 def test_cancel_with_worker_processes_keeps_what_they_tracked(take):
@@ -404,8 +408,8 @@ def test_passes_between_anchors_meet_past_the_middle(take):
     calls = []
     res = run(take, anchor_frames=(0, N - 1), blend_reach=1,
               progress=lambda d, t: calls.append((d, t)))
-    # forward 1..4, backward 6..2: 4 + 5 frames instead of 6 + 6
-    assert calls[-1] == (9, 9)
+    # forward 1..4, backward 6..2: 4 + 5 frames instead of 6 + 6, in each of two rounds
+    assert calls[-1] == (18, 18)
     assert list(res.frames) == list(range(N))
     error = np.linalg.norm(res.joints3d - joints, axis=2).mean(axis=1)
     assert error.max() < 0.06
@@ -414,7 +418,7 @@ def test_passes_between_anchors_meet_past_the_middle(take):
     # adjacent anchors have nothing between them: 2..7 alone is tracked, 3..6 both ways
     calls = []
     res = run(take, anchor_frames=(0, 1, 2, N - 1), progress=lambda d, t: calls.append((d, t)))
-    assert calls[-1] == (8, 8) and list(res.frames) == list(range(N))
+    assert calls[-1] == (16, 16) and list(res.frames) == list(range(N))
 
 
 def test_a_pass_goes_on_where_its_partner_lost_the_body(take, monkeypatch):
@@ -433,9 +437,10 @@ def test_a_pass_goes_on_where_its_partner_lost_the_body(take, monkeypatch):
     calls, said = [], []
     res = T.track(frozen, anchors, cams, init=init, blend_reach=1,
                   progress=lambda d, t: calls.append((d, t)), log=said.append)
-    assert asked == [([1, 2, 3, 4], [2, 3, 4, 5, 6], 2, 4)]
+    assert asked == [([1, 2, 3, 4], [2, 3, 4, 5, 6], 2, 4)] * 2     # once a round
     assert "frames 0-7: 2 passes go on where the other lost the body" in said
-    assert calls[-1] == (12, 12)
+    assert calls[-1] == (24, 24)
+    assert all(b[0] >= a[0] for a, b in zip(calls, calls[1:]))
     # the passes went on from where they stopped: the poses of whole passes, blended over
     # the whole stretch (only the limb search's draws differ)
     np.testing.assert_allclose(res.joints3d, full.joints3d, atol=1e-4)
@@ -444,7 +449,7 @@ def test_a_pass_goes_on_where_its_partner_lost_the_body(take, monkeypatch):
         calls = []
         forked = T.track(frozen, anchors, cams, init=init, blend_reach=1, workers=2,
                          progress=lambda d, t: calls.append((d, t)))
-        assert calls[-1] == (12, 12)
+        assert calls[-1] == (24, 24)
         assert np.array_equal(forked.joints3d, res.joints3d)
 
 

@@ -1,0 +1,123 @@
+"""Realistic benchmark sets: every set with every tracker, one table.
+
+The sets are Cycles renders of CMU performers (skinned, clothed body, shadows, glossy floors,
+clutter, sensor noise) in ``../shared/bench/sets`` (or ``$ZOOPRAXIS_BENCH``), with ground truth.
+Each run goes through ``../shared/bench/run_set.py``, which runs ``python -m zoopraxis track``
+as a user would (clicks: the true 2D joints of frame 0 plus 2 px of noise) and scores it.
+
+    .venv/bin/python benchmarks/bench_realistic.py [--sets a,b] [--trackers default,hybrid]
+        [--keep DIR] [--extra-sets DIR]
+
+Columns: MPJPE and Procrustes-aligned PA-MPJPE (mm), frames lost (the tracker said "lost" or
+MPJPE over 150 mm; for one view, PA-MPJPE over 150 mm), knee and elbow flexion RMSE (degrees),
+frames per second (wall time with start-up), and how the per-frame status agrees with the
+error: frames over 150 mm called ok (must be 0), frames called lost that are under 150 mm
+(false alarms), frames called ok that are under 50 mm, over all frames called ok.
+``--extra-sets DIR`` adds every set folder under DIR (sets rendered with
+``../shared/bench/render``; they stay outside the repository).
+"""
+
+import argparse
+import json
+import os
+import re
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+TRACKERS = ["default", "hybrid", "particle"]
+LINE = re.compile(r"MPJPE ([\d.]+) mm, PA ([\d.]+) mm, lost (\d+)/(\d+) \(after alignment (\d+)\), "
+                  r"knee ([\d.]+) deg, elbow ([\d.]+) deg, ([\d.]+) frames/s")
+
+
+def bench_dir():
+    return Path(os.environ.get("ZOOPRAXIS_BENCH", ROOT.parent / "shared" / "bench"))
+
+
+def status_agreement(set_dir, result_path, single_view):
+    """Frames over 150 mm called ok, frames called lost under 150 mm, and the share of frames
+    called ok that are under 50 mm (per-frame MPJPE; PA-MPJPE for one view)."""
+    sys.path.insert(0, str(bench_dir()))
+    from run_set import STD, load_gt, procrustes
+
+    gt = load_gt(set_dir)
+    r = json.loads(Path(result_path).read_text())
+    idx = [r["joints"].index(j) for j in STD]
+    pred = np.asarray(r["joints3d"], float)[:, idx]
+    truth = gt["j3"][np.asarray(r["frames"], int)]
+    if single_view:
+        err = np.array([np.linalg.norm(procrustes(p, g) - g, axis=-1).mean()
+                        for p, g in zip(pred, truth)]) * 1000
+    else:
+        err = np.linalg.norm(pred - truth, axis=-1).mean(1) * 1000
+    status = np.array(r["status"])
+    ok, lost = status == "ok", status == "lost"
+    return {"ok_over_150": int(np.sum(ok & (err > 150))),
+            "lost_under_150": int(np.sum(lost & (err <= 150))),
+            "ok_good": f"{int(np.sum(ok & (err < 50)))}/{int(ok.sum())}",
+            "statuses": f"{int(ok.sum())}/{int(np.sum(status == 'uncertain'))}/{int(lost.sum())}"}
+
+
+def run(set_dir, tracker, keep):
+    keep = Path(keep) / f"{set_dir.name}_{tracker}"
+    cmd = [str(ROOT / ".venv" / "bin" / "python"), str(bench_dir() / "run_set.py"),
+           "--set", str(set_dir), "--keep", str(keep)]
+    if tracker != "default":
+        cmd += ["--tracker", tracker]
+    p = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
+    m = LINE.search(p.stdout)
+    if not m:
+        tail = (p.stdout + p.stderr).strip().splitlines()[-1:]
+        return {"error": " ".join(tail)[:120]}
+    mp, pa, lost, n, pa_lost, knee, elbow, fps = m.groups()
+    views = len([d for d in set_dir.iterdir() if d.is_dir() and d.name.startswith("cam")])
+    out = {"views": views, "mpjpe": float(mp), "pa": float(pa), "lost": int(lost),
+           "pa_lost": int(pa_lost), "frames": int(n), "knee": float(knee),
+           "elbow": float(elbow), "fps": float(fps)}
+    out.update(status_agreement(set_dir, keep / "result.json", views == 1))
+    return out
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sets", help="comma-separated set names (default: all)")
+    ap.add_argument("--trackers", default=",".join(TRACKERS))
+    ap.add_argument("--extra-sets", help="a folder of more sets (each with gt.npz)")
+    ap.add_argument("--keep", help="keep each run's inputs and result.json here")
+    a = ap.parse_args()
+    roots = [bench_dir() / "sets"] + ([Path(a.extra_sets)] if a.extra_sets else [])
+    sets = sorted((d for r in roots if r.is_dir() for d in r.iterdir()
+                   if (d / "gt.npz").exists()), key=lambda d: d.name)
+    if a.sets:
+        wanted = a.sets.split(",")
+        sets = [d for d in sets if d.name in wanted]
+    if not sets:
+        print(f"no sets found under {', '.join(map(str, roots))}")
+        return 2
+    keep = a.keep or tempfile.mkdtemp(prefix="zp-realistic-")
+    head = (f"{'set':16} {'tracker':9} {'views':>5} {'MPJPE':>6} {'PA':>6} {'lost':>5} "
+            f"{'PAlost':>6} {'knee':>5} {'elbow':>5} {'fps':>5}  {'ok/unc/lost':>11} "
+            f"{'ok>150':>6} {'lost<150':>8} {'ok<50':>7}")
+    print(head)
+    print("-" * len(head))
+    for d in sets:
+        for tracker in a.trackers.split(","):
+            r = run(d, tracker, keep)
+            if "error" in r:
+                print(f"{d.name:16} {tracker:9} failed: {r['error']}")
+                continue
+            print(f"{d.name:16} {tracker:9} {r['views']:5d} {r['mpjpe']:6.1f} {r['pa']:6.1f} "
+                  f"{r['lost']:5d} {r['pa_lost']:6d} {r['knee']:5.1f} {r['elbow']:5.1f} "
+                  f"{r['fps']:5.2f}  {r['statuses']:>11} {r['ok_over_150']:6d} "
+                  f"{r['lost_under_150']:8d} {r['ok_good']:>7}", flush=True)
+    print(f"(runs kept in {keep}; lost: said lost or MPJPE > 150 mm, PA-MPJPE for one view; "
+          "PAlost: PA-MPJPE > 150 mm; ok<50: frames called ok under 50 mm / frames called ok)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
