@@ -81,9 +81,11 @@ def main(argv):
     import numpy as np
 
     from .initialize import PosePrior, take_angles
+    from .outputs import replacing
 
     args = build_parser().parse_args(argv)
-    out = check_output(args.out, args.force)
+    out = check_output(args.out, args.force,
+                       inputs=[("take", take) for take in args.takes], suffixes=(".npz",))
     check_template(args.template)
     if args.step < 1:
         raise ZoopraxisError(f"--step {args.step}: give 1 or more")
@@ -112,7 +114,8 @@ def main(argv):
         if not angles:
             return 130
     prior = PosePrior.from_takes(angles, args.template)
-    prior.save(out)
+    with replacing(out) as temporary:
+        prior.save(temporary)
     takes = f"{len(angles)} take{'s' if len(angles) > 1 else ''}"
     print(f"prior: {len(prior.samples)} poses (with mirror images) of {takes} -> {out}")
     return 130 if cancelled else 0
