@@ -196,7 +196,7 @@ def read_dims(path, template):
     from .plausible import check_body_dims
 
     path = Path(path)
-    data = read_json(path, "--dims-from file")
+    data = read_json(path, "file")
     # init.json keeps the body's template and lengths at the top, result.json under "body"
     body = data.get("body", data) if isinstance(data, dict) else None
     if not isinstance(body, dict) or data.get("format") not in ("zoopraxis-init/1",

@@ -1382,9 +1382,11 @@ def init_from_json(data, path="init.json"):
     """
     try:
         return _init_from_json(data, path)
-    except (TypeError, ValueError, AttributeError, KeyError, IndexError, OverflowError) as error:
-        if isinstance(error, ZoopraxisError):
+    except ZoopraxisError as error:
+        if str(error).startswith(str(path)):
             raise
+        raise ZoopraxisError(f"{path}: {error}") from None
+    except (TypeError, ValueError, AttributeError, KeyError, IndexError, OverflowError) as error:
         raise ZoopraxisError(f"{path}: malformed init file ({type(error).__name__}: "
                              f"{str(error)[:80]})") from None
 

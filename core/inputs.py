@@ -82,4 +82,4 @@ def read_json(path, what="file"):
     except ValueError as error:  # an integer of more digits than Python converts
         raise ZoopraxisError(f"{path}: not valid JSON ({error})") from None
     except RecursionError:
-        raise ZoopraxisError(f"{path}: not a {what}: JSON nested too deep") from None
+        raise ZoopraxisError(f"{path}: JSON nested too deep for a {what}") from None

@@ -40,6 +40,17 @@ MIN_BODY_PX = 32
 MIN_MAX_SIZE = 32
 
 
+def finite_number(value):
+    """Whether a decoded JSON value is a finite number (not a bool, not an integer too big
+    for a float)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return False
+    try:
+        return math.isfinite(value)
+    except OverflowError:
+        return False
+
+
 def check_body_dims(dims, where):
     """Refuse body lengths outside the range of people.
 
@@ -61,8 +72,7 @@ def check_body_dims(dims, where):
         if name not in dims:
             continue
         value = dims[name]
-        if isinstance(value, bool) or not isinstance(value, (int, float)) \
-                or not math.isfinite(value):
+        if not finite_number(value):
             raise ZoopraxisError(f"{where}: body length '{name}' is not a number: {value!r:.40}")
         low, high = lo * DEFAULT_DIMS[name], hi * DEFAULT_DIMS[name]
         if not low <= value <= high:

@@ -127,7 +127,7 @@ def _strings(value, what, path):
 def _check_body(body, path):
     """The result's body: known template and shapes, finite lengths of a person."""
     from .body import DIM_NAMES, TEMPLATES
-    from .plausible import check_body_dims
+    from .plausible import check_body_dims, finite_number
 
     if not isinstance(body, dict):
         raise ZoopraxisError(f"{path}: 'body' must be an object")
@@ -144,8 +144,7 @@ def _check_body(body, path):
     for name, value in dims.items():
         if name not in DIM_NAMES:
             raise ZoopraxisError(f"{path}: unknown body dimension '{name}'")
-        if isinstance(value, bool) or not isinstance(value, (int, float)) \
-                or not np.isfinite(value) or value < 0:
+        if not finite_number(value) or value < 0:
             raise ZoopraxisError(f"{path}: body dimension '{name}' must be a positive number, "
                                  f"got {value!r:.40}")
     check_body_dims(dims, path)
@@ -164,6 +163,8 @@ def read_result(path):
         file, not JSON, a missing key, a value of the wrong type or shape, NaN or infinity,
         a frame rate that is not positive, a body outside human range.
     """
+    from .plausible import finite_number
+
     path = Path(path)
     data = read_json(path, "result file")
     if not isinstance(data, dict):
@@ -175,8 +176,7 @@ def read_result(path):
     if mode not in MODES:
         raise ZoopraxisError(f"{path}: mode {mode!r:.40} is not one of {', '.join(MODES)}")
     fps = _require(data, "fps", path)
-    if isinstance(fps, bool) or not isinstance(fps, (int, float)) or not np.isfinite(fps) \
-            or not 0 < fps <= 10000:
+    if not finite_number(fps) or not 0 < fps <= 10000:
         raise ZoopraxisError(f"{path}: 'fps' must be a positive number of frames per second, "
                              f"got {fps!r:.40}")
     names = _strings(_require(data, "joints", path), "joints", path)
