@@ -18,6 +18,22 @@ from .errors import ZoopraxisError
 MAX_JSON_BYTES = 1 << 30
 
 
+def file_mode(path, what="file"):
+    """``stat``'s mode of ``path`` (symlinks followed), without opening it.
+
+    Raises
+    ------
+    ZoopraxisError
+        Missing or not reachable, naming ``what``.
+    """
+    try:
+        return Path(path).stat().st_mode
+    except FileNotFoundError:
+        raise ZoopraxisError(f"{path}: no such {what}") from None
+    except OSError as error:
+        raise ZoopraxisError(f"{path}: cannot read the {what} ({error.strerror})") from None
+
+
 def check_regular_file(path, what="file"):
     """``path`` as a Path when it names an existing regular file (symlinks followed).
 
@@ -27,12 +43,7 @@ def check_regular_file(path, what="file"):
         Missing, a folder, a pipe, socket or device, or not reachable; naming ``what``.
     """
     path = Path(path)
-    try:
-        mode = path.stat().st_mode
-    except FileNotFoundError:
-        raise ZoopraxisError(f"{path}: no such {what}") from None
-    except OSError as error:
-        raise ZoopraxisError(f"{path}: cannot read the {what} ({error.strerror})") from None
+    mode = file_mode(path, what)
     if stat.S_ISDIR(mode):
         raise ZoopraxisError(f"{path}: is a folder, not a {what}")
     if not stat.S_ISREG(mode):

@@ -21,6 +21,7 @@ import cv2
 import numpy as np
 
 from .errors import ZoopraxisError
+from .inputs import file_mode
 
 IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")
 EXR_EXTENSION = ".exr"
@@ -377,12 +378,7 @@ def open_plate(path, *, name=None, fps=None, cache_size=DEFAULT_CACHE_SIZE):
         fps = float(fps)
         if not (math.isfinite(fps) and fps > 0):
             raise ZoopraxisError(f"fps of plate {path} must be positive, got {fps}")
-    try:
-        mode = path.stat().st_mode
-    except FileNotFoundError:
-        raise ZoopraxisError(f"plate not found: {path}") from None
-    except OSError as error:
-        raise ZoopraxisError(f"plate {path}: cannot read ({error.strerror})") from None
+    mode = file_mode(path, "plate")
     if not (stat.S_ISDIR(mode) or stat.S_ISREG(mode)):
         # Opening a named pipe blocks until a writer comes, deaf to Ctrl-C: never try.
         raise ZoopraxisError(f"plate {path} is not a regular file or folder (a pipe or a "
