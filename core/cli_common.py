@@ -169,7 +169,7 @@ def open_plates(paths, fps=None):
     if not paths:
         raise ZoopraxisError("give at least one --plate VIEW=PATH")
     plates = {name: open_plate(path, name=name, fps=fps) for name, path in paths.items()}
-    check_frame_rates(plates)
+    check_frame_rates({name: plate.fps for name, plate in plates.items()})
     return plates
 
 

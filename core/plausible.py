@@ -81,20 +81,20 @@ def check_body_dims(dims, where):
                                  "metres?")
 
 
-def check_frame_rates(plates):
+def check_frame_rates(rates):
     """Refuse plates of one take that run at different frame rates.
 
     Parameters
     ----------
-    plates : dict of str to Plate
-        Plates whose ``fps`` is None (an image folder) are not compared.
+    rates : dict of str to float or None
+        Frames per second by view; None (an image folder) is not compared.
 
     Raises
     ------
     ZoopraxisError
         Two rates further apart than :data:`FPS_TOLERANCE`, naming the views and rates.
     """
-    rates = {view: plate.fps for view, plate in plates.items() if plate.fps}
+    rates = {view: fps for view, fps in rates.items() if fps}
     if len(rates) < 2:
         return
     slow = min(rates, key=rates.get)

@@ -143,3 +143,23 @@ def test_track_with_a_removed_clip_is_one_line(blender):
     bpy.data.movieclips.remove(settings.views[1].clip)
     with pytest.raises(RuntimeError, match="view 'cam1': its movie clip was removed"):
         bpy.ops.zoopraxis.track()
+
+
+def test_load_plates_refuses_videos_of_different_frame_rates(blender, tmp_path):
+    import cv2
+    import numpy as np
+
+    from zoopraxis.addon.plates import load_plates
+
+    videos = {}
+    for view, fps in (("cam0", 30), ("cam1", 25)):
+        videos[view] = tmp_path / f"{view}.avi"
+        writer = cv2.VideoWriter(str(videos[view]), cv2.VideoWriter_fourcc(*"MJPG"), fps,
+                                 (64, 48))
+        for _ in range(3):
+            writer.write(np.zeros((48, 64, 3), np.uint8))
+        writer.release()
+    before = len(bpy.data.movieclips)
+    with pytest.raises(ZoopraxisError, match="'cam0' \\(30 fps\\) and 'cam1' \\(25 fps\\)"):
+        load_plates(blender, videos, report=lambda *_: None)
+    assert len(bpy.data.movieclips) == before and not len(blender.scene.zoopraxis.views)
