@@ -74,8 +74,8 @@ def check_output(path, force, *, inputs=(), suffixes=None, option="--out"):
         raise ZoopraxisError(f"{option} {path}: expected a {' or '.join(suffixes)} file name")
     for name, source in inputs:
         if source is not None and _same_file(path, source):
-            raise ZoopraxisError(f"{option} {path}: is also the {name} input; write the "
-                                 "output to another file")
+            raise ZoopraxisError(f"{option} {path}: is the same file as {name} {source}; "
+                                 "write the output to another file")
     if path.exists() and not force:
         raise ZoopraxisError(f"{path}: file exists (use --force to replace it)")
     if path.exists() and not path.is_file():
@@ -88,10 +88,10 @@ def check_output(path, force, *, inputs=(), suffixes=None, option="--out"):
 def replacing(path, *, suffix=""):
     """Write ``path`` through a temporary file that replaces it only when complete.
 
-    Yields the temporary path (in the target's folder, a unique name ending in ``suffix``,
-    e.g. the extension an exporter insists on); when the block ends without an exception
-    the temporary file is renamed over ``path``, otherwise it is removed and ``path`` is left
-    as it was. Missing folders above ``path`` are made.
+    Yields the temporary path (an empty file in the target's folder, a unique name ending in
+    ``.part`` and ``suffix``, e.g. the extension an exporter insists on); when the block ends
+    without an exception the temporary file is renamed over ``path``, otherwise it is removed
+    and ``path`` is left as it was. Missing folders above ``path`` are made.
 
     Raises
     ------
@@ -103,7 +103,7 @@ def replacing(path, *, suffix=""):
     existed = path.is_file()
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix + ".part",
+        handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part" + suffix,
                                              dir=path.parent)
         os.close(handle)
     except OSError as error:
