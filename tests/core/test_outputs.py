@@ -120,7 +120,8 @@ def test_track_output_folder_checked_before_tracking(tmp_path, capsys, monkeypat
     monkeypatch.setattr(track, "track", never)
     blocker = tmp_path / "afile"
     blocker.write_text("x")
-    for out, message in ((tmp_path, "is a folder"), (blocker / "r.json", "is a file, not a folder")):
+    for out, message in ((tmp_path, "is a folder"),
+                         (blocker / "r.json", "is a file, not a folder")):
         assert cli.main(["track"] + PLATES + ["--markers", str(SAMPLE / "markers.json"),
                                               "--out", str(out), "--force"]) == 2
         assert message in capsys.readouterr().err
