@@ -1,7 +1,6 @@
 """``zoopraxis calibrate``: cameras from a checkerboard or ChArUco board seen in the plates."""
 
 import argparse
-from pathlib import Path
 
 from .cli_common import add_output_arguments, check_output, open_plates, parse_view_values
 from .errors import ZoopraxisError

@@ -80,15 +80,7 @@ def main(argv):
         for warning in check_calibration(cameras, anchors, args.calibration):
             print(f"track: warning: {warning}", flush=True)
     else:
-        kept, warnings = markers.uncalibrated_views(anchors, list(opened), args.markers)
-        for warning in warnings:
-            print(f"track: warning: {warning}", flush=True)
-        if len(kept) < len(opened):
-            for view in [v for v in opened if v not in kept]:
-                opened.pop(view).close()
-                offsets.pop(view, None)
-            anchors = markers.only_views(anchors, kept)
-            markers.check_markers(anchors, kept, n, path=args.markers)
+        anchors = _placeable_views(opened, offsets, anchors, n, args.markers)
     for warning in check_working_size(anchors, {v: p.image_size for v, p in opened.items()},
                                       args.max_size):
         print(f"track: warning: {warning}", flush=True)
@@ -138,6 +130,24 @@ def main(argv):
         print(f"track: cancelled; the {result.num_frames} frames tracked are in {out}")
         return 130
     return 0
+
+
+def _placeable_views(opened, offsets, anchors, num_frames, path):
+    """Uncalibrated: leave out (with a warning) the plates of views with too few clicks at the
+    first anchor to place their camera; returns the anchors of the views kept."""
+    from . import markers
+
+    kept, warnings = markers.uncalibrated_views(anchors, list(opened), path)
+    for warning in warnings:
+        print(f"track: warning: {warning}", flush=True)
+    if len(kept) == len(opened):
+        return anchors
+    for view in [v for v in opened if v not in kept]:
+        opened.pop(view).close()
+        offsets.pop(view, None)
+    anchors = markers.only_views(anchors, kept)
+    markers.check_markers(anchors, kept, num_frames, path=path)
+    return anchors
 
 
 def _write_or_rescue(out, result, force):
