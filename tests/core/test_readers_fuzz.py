@@ -248,3 +248,42 @@ def test_result_values_checked(tmp_path):
     path.write_text(json.dumps(data))
     with pytest.raises(ZoopraxisError, match="body length 'thigh' of 50 m is outside the human"):
         result.read_result(path)
+
+
+def test_plate_reader_fuzzed(tmp_path, monkeypatch):
+    import cv2
+
+    from zoopraxis.core import plates
+
+    rng = np.random.default_rng(2352)
+    video = tmp_path / "good.avi"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 30, (64, 48))
+    for k in range(6):
+        writer.write(np.full((48, 64, 3), 40 * k, np.uint8))
+    writer.release()
+    raw = video.read_bytes()
+    bad = tmp_path / "bad.avi"
+    for blob in [rng.bytes(5000), b"", raw[:len(raw) // 2], raw[:200],
+                 raw[:4000] + rng.bytes(4000)]:
+        bad.write_bytes(blob)
+        try:
+            with plates.open_plate(bad) as plate:
+                for frame in range(plate.num_frames):
+                    plate.read(frame)
+        except ZoopraxisError as error:
+            assert "bad.avi" in str(error)
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    for k, blob in enumerate([rng.bytes(3000), b"\xff\xd8" + rng.bytes(3000) + b"\xff\xd9"]):
+        (folder / f"{k}.jpg").write_bytes(blob)
+        with pytest.raises(ZoopraxisError, match=f"{k}.jpg"):
+            plates.open_plate(folder)
+        (folder / f"{k}.jpg").unlink()
+
+    def unlistable(self):
+        raise PermissionError(13, "Permission denied")
+
+    (folder / "0.jpg").write_bytes(b"x")
+    monkeypatch.setattr(type(folder), "iterdir", unlistable)
+    with pytest.raises(ZoopraxisError, match="frames: cannot list it \\(Permission denied\\)"):
+        plates.open_plate(folder)
