@@ -52,21 +52,17 @@ def read_take_joints(path):
 
         return standard_joints(load_cmu(path, fps=30.0))
     if suffix == ".json":
-        import json
-
+        from .inputs import read_json
         from .joints import STANDARD_JOINTS
         from .result import read_result
 
-        try:
-            data = json.loads(path.read_text())
-        except (OSError, ValueError) as error:
-            raise ZoopraxisError(f"{path}: not readable JSON ({error})") from None
+        data = read_json(path, "take")
         if isinstance(data, dict) and data.get("format") == "zoopraxis-truth/1":
             # zoopraxis synth's ground truth: the result.json layout without statuses
             try:
                 order = [list(data["joints"]).index(j) for j in STANDARD_JOINTS]
                 X = np.asarray(data["joints3d"], float)[:, order]
-            except (KeyError, ValueError, IndexError, TypeError) as error:
+            except (KeyError, ValueError, IndexError, TypeError, OverflowError) as error:
                 raise ZoopraxisError(f"{path}: malformed truth file ({error})") from None
             return X
         result = read_result(path)

@@ -287,3 +287,12 @@ def test_plate_reader_fuzzed(tmp_path, monkeypatch):
     monkeypatch.setattr(type(folder), "iterdir", unlistable)
     with pytest.raises(ZoopraxisError, match="frames: cannot list it \\(Permission denied\\)"):
         plates.open_plate(folder)
+
+
+def test_prior_command_take_reader_fuzzed(tmp_path):
+    from zoopraxis.core.cli_prior import read_take_joints
+
+    truth = {"format": "zoopraxis-truth/1", "joints": list(STANDARD_JOINTS),
+             "joints3d": np.zeros((2, 17, 3)).tolist()}
+    fuzz(read_take_joints, truth, tmp_path, 2353, name="truth.json")
+    fuzz(read_take_joints, good_result(), tmp_path, 2354, name="result.json")
