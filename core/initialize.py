@@ -1576,6 +1576,10 @@ def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None,
         pose_prior.with_broad(kin.prior_mean, kin.prior_sigma)
     fit.flips = flips
     result = fit.run()
+    if calibrated:
+        from .plausible import fit_rms_warnings
+
+        result.warnings.extend(fit_rms_warnings(result.rms, {v: cameras[v] for v in views}))
     if fit_dims and all(_seen_twice(a, views) < _MIN_FRAME_JOINTS for a in anchors):
         result.notes.append(ONE_VIEW_LENGTHS_NOTE)
     return result

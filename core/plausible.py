@@ -264,3 +264,25 @@ def check_calibration(cameras, anchors, path):
     return [f"{path}: camera '{v}' explains the clicks poorly (reprojection RMS "
             f"{rms[v]:.1f} px); check its calibration and the clicks in that view"
             for v in rms if rms[v] > _threshold(CLICK_RMS_WARN, pinholes[v])]
+
+
+def fit_rms_warnings(rms, cameras):
+    """Warnings about calibrated views whose clicks the fitted body misses by far more than
+    the clicks' noise (the calibration, or the clicks, of that view are off).
+
+    Parameters
+    ----------
+    rms : dict of str to float
+        Reprojection RMS of the fit per view, pixels.
+    cameras : dict of str to camera
+        The views' cameras (pinhole ones are judged).
+
+    Returns
+    -------
+    warnings : list of str
+    """
+    return [f"view '{v}': the fitted body misses the clicks by {error:.0f} px RMS (clicks are "
+            f"a few px off): check camera '{v}' of the calibration, and the clicks in that view"
+            for v, error in rms.items()
+            if isinstance(cameras.get(v), PinholeCamera)
+            and error > _threshold(CLICK_RMS_WARN, cameras[v])]

@@ -187,3 +187,15 @@ def test_uncalibrated_track_with_a_hidden_view(tmp_path, capsys):
                                          "--workers", "1", "--out", str(out)]) == 0
     assert "view 'cam1' has 0 joints clicked" in capsys.readouterr().out
     assert sorted(json.loads(out.read_text())["views"]) == ["cam0", "cam2"]
+
+
+def test_initialization_warns_about_a_view_it_cannot_fit(take, tmp_path):
+    from zoopraxis.core.initialize import initialize
+
+    data, anchors = take
+    cameras = cameras_of(changed(data, _wild_lens), tmp_path)
+    result = initialize(anchors[:1], cameras, views=VIEWS, pose_prior=None)
+    assert any(w.startswith("view 'cam1': the fitted body misses the clicks by")
+               for w in result.warnings), result.warnings
+    good = initialize(anchors[:1], cameras_of(data, tmp_path), views=VIEWS, pose_prior=None)
+    assert not any("misses the clicks" in w for w in good.warnings)
