@@ -18,6 +18,7 @@ import bpy
 import numpy as np
 
 from ..core.errors import ZoopraxisError
+from ..core.outputs import check_output
 from ..core.result import STATUSES, TrackResult, read_result
 from . import keying, motion, retarget
 
@@ -296,16 +297,22 @@ def set_scene_range(scene, result, first_frame):
     scene.render.fps_base = scene.render.fps / fps
 
 
-def check_outputs(paths, force):
-    """Refuse outputs that exist (unless ``force``) or whose folder does not."""
-    for path in paths:
+def check_outputs(outputs, force, result_path):
+    """Check the outputs before any work: the right extension, writable, none of them the
+    result read nor another output (:func:`outputs.check_output`).
+
+    Parameters
+    ----------
+    outputs : dict of str to path or None
+        Option (``--bvh``) -> file; None where not given.
+    """
+    seen = [("--result", result_path)]
+    for option, path in outputs.items():
         if path is None:
             continue
-        path = Path(path)
-        if path.exists() and not force:
-            raise ZoopraxisError(f"{path}: file exists (use --force to replace it)")
-        if not path.parent.is_dir():
-            raise ZoopraxisError(f"{path}: folder {path.parent} does not exist")
+        check_output(path, force, inputs=seen, suffixes=("." + option.lstrip("-"),),
+                     option=option)
+        seen.append((option, path))
 
 
 def bake_file(result_path, *, blend=None, bvh=None, fbx=None, force=False, name=None,
@@ -321,7 +328,7 @@ def bake_file(result_path, *, blend=None, bvh=None, fbx=None, force=False, name=
     """
     from . import export
 
-    check_outputs([blend, bvh, fbx], force)
+    check_outputs({"--blend": blend, "--bvh": bvh, "--fbx": fbx}, force, result_path)
     result = read_result(result_path)
     if not bpy.data.filepath:
         # An empty file, preferences untouched: inside Blender this command runs with the

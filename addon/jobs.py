@@ -16,6 +16,7 @@ import traceback
 import bpy
 
 from ..core.errors import ZoopraxisError
+from .guard import SceneGuard
 
 TIMER_STEP = 0.1
 
@@ -87,11 +88,19 @@ class Job:
         return f"{label}: starting, Esc to stop"
 
 
+def one_line(ex):
+    """The user's line for an error: a ZoopraxisError's own message; for anything else (a bug)
+    its type and message, and where to find the rest."""
+    message = " ".join(str(ex).split())
+    if isinstance(ex, ZoopraxisError):
+        return message
+    return f"internal error, see the console: {type(ex).__name__}: {message[:200]}"
+
+
 def report_error(operator, ex, tb=None):
     """One short ERROR line for the user, the traceback for the console."""
-    message = " ".join(str(ex).split())
-    operator.report({'ERROR'}, message)
-    print(tb or traceback.format_exc(), flush=True)
+    operator.report({'ERROR'}, one_line(ex))
+    print(tb or "".join(traceback.format_exception(ex)), flush=True)
 
 
 class JobOperator:
@@ -119,7 +128,7 @@ class JobOperator:
             work = self.prepare(context)
             job = Job(work).run_here()
             return self._complete(context, job)
-        except ZoopraxisError as ex:
+        except Exception as ex:
             report_error(self, ex)
             return {'CANCELLED'}
         finally:
@@ -135,7 +144,7 @@ class JobOperator:
             return self.execute(context)
         try:
             work = self.prepare(context)
-        except ZoopraxisError as ex:
+        except Exception as ex:
             report_error(self, ex)
             self.cleanup()
             return {'CANCELLED'}
@@ -175,12 +184,11 @@ class JobOperator:
     def _complete(self, context, job):
         settings = context.scene.zoopraxis
         if job.error is not None:
-            if isinstance(job.error, ZoopraxisError):
-                report_error(self, job.error, job.traceback)
-                settings.status = f"{self.label}: failed: {job.error}"
-                return {'CANCELLED'}
-            settings.status = f"{self.label}: failed (see the console)"
-            raise job.error
+            if not isinstance(job.error, Exception):  # KeyboardInterrupt, SystemExit
+                raise job.error
+            report_error(self, job.error, job.traceback)
+            settings.status = f"{self.label}: failed: {one_line(job.error)}"
+            return {'CANCELLED'}
         if job.value is None:
             settings.status = f"{self.label}: stopped before any frame was done"
             self.report({'WARNING'}, settings.status)
@@ -188,10 +196,11 @@ class JobOperator:
         from .bake import ensure_object_mode
 
         try:
-            summary = self.finish(context, job.value, job.cancelled)
-        except ZoopraxisError as ex:
+            with SceneGuard(context.scene):
+                summary = self.finish(context, job.value, job.cancelled)
+        except Exception as ex:
             report_error(self, ex)
-            settings.status = f"{self.label}: failed: {ex}"
+            settings.status = f"{self.label}: failed: {one_line(ex)}"
             return {'CANCELLED'}
         finally:
             ensure_object_mode(context)

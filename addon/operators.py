@@ -1,8 +1,9 @@
 """Thin operators: gather properties, import the worker lazily, call it, report one line.
 
-Workers raise ZoopraxisError on bad input before they change the scene; an operator catches it,
-reports a short ERROR line naming the file, frame, view, joint or bone, prints the traceback to
-the console and leaves the scene in Object mode.
+Workers raise ZoopraxisError on bad input before they change the scene; an operator catches it
+(and any other error), reports a short ERROR line naming the file, frame, view, joint or bone,
+prints the traceback to the console, removes what a failed worker had added to the scene and
+leaves the scene in Object mode.
 """
 
 from pathlib import Path
@@ -13,15 +14,18 @@ from bpy.props import (BoolProperty, CollectionProperty, FloatProperty, IntPrope
 from bpy_extras.io_utils import ExportHelper, ImportHelper
 
 from ..core.errors import ZoopraxisError
+from .guard import SceneGuard
 from .jobs import JobOperator, report_error
 from .props import NOTE_PREFIX
 
 
 def run(operator, context, work):
-    """Call ``work()``; on ZoopraxisError report it and cancel. Always end in Object mode."""
+    """Call ``work()``; on any error report one line (the traceback goes to the console),
+    take out what the work had added to the scene, and cancel. Always end in Object mode."""
     try:
-        work()
-    except ZoopraxisError as ex:
+        with SceneGuard(context.scene):
+            work()
+    except Exception as ex:
         report_error(operator, ex)
         return {'CANCELLED'}
     finally:
@@ -340,8 +344,12 @@ class ZOOPRAXIS_OT_track(JobOperator, bpy.types.Operator):
     label = "Track"
 
     def prepare(self, context):
+        from ..core.outputs import check_output
         from . import pipeline
+        from .status import output_folder
 
+        # result.json goes there after the work: a folder that takes no file is found now
+        check_output(output_folder() / "result.json", True)
         self._take = take = pipeline.gather(context)
         init = pipeline.initial_for(context.scene, take)
         return lambda progress, cancel: pipeline.track(

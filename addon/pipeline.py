@@ -100,7 +100,8 @@ def gather(context, *, need_markers=True):
         No plates, an unreadable plate, views of different lengths, no or too few markers (a
         joint marked in no view), a calibrated view without a camera, a bad frame range.
     """
-    from ..core.markers import check_markers
+    from ..core.markers import check_markers, only_views, uncalibrated_views
+    from ..core.plausible import check_calibration
     from ..core.plates import check_same_length, open_plate
     from . import markers
     from .calibration import cameras_from_scene
@@ -116,11 +117,28 @@ def gather(context, *, need_markers=True):
     plates = {}
     try:
         for v in views:
+            if v.clip is None:
+                raise ZoopraxisError(f"view '{v.name}': its movie clip was removed; load the "
+                                     "plate again or remove the view")
             plates[v.name] = open_plate(v.path, name=v.name)
         n = check_same_length(plates, offsets)
         anchors = markers.read_anchors(settings)
         if need_markers:
-            check_markers(anchors, list(plates), n, path="joint markers")
+            check_markers(anchors, list(plates), n, path="joint markers",
+                          image_sizes={name: p.image_size for name, p in plates.items()})
+            if cameras is not None:
+                for warning in check_calibration(cameras, anchors, "the scene's cameras"):
+                    print(f"zoopraxis: warning: {warning}", flush=True)
+            else:
+                kept, warnings = uncalibrated_views(anchors, list(plates), "joint markers")
+                for warning in warnings:
+                    print(f"zoopraxis: warning: {warning}", flush=True)
+                for name in [name for name in plates if name not in kept]:
+                    plates.pop(name).close()
+                    paths.pop(name)
+                    offsets.pop(name)
+                anchors = only_views(anchors, kept)
+                check_markers(anchors, kept, n, path="joint markers")
         if settings.use_frame_range:
             start, stop = settings.frame_range_start, settings.frame_range_end
             if not 0 <= start < stop <= n:

@@ -11,6 +11,7 @@ import bpy
 from ..core.errors import ZoopraxisError
 from ..core.joints import STANDARD_JOINTS
 from ..core.plates import IMAGE_EXTENSIONS, natural_key, open_plate
+from ..core.plausible import check_frame_rates
 from . import convert
 
 
@@ -91,6 +92,7 @@ def load_plates(context, plates, *, fps=None, report=print):
         with open_plate(path, name=name, fps=fps) as plate:
             opened.append((plate.name, path, plate.num_frames, plate.fps, plate.image_size))
     names = [o[0] for o in opened]
+    check_frame_rates({o[0]: o[3] for o in opened})
     for name in names:
         if settings.view(name) is not None:
             raise ZoopraxisError(f"view '{name}' is already loaded")

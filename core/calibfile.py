@@ -23,8 +23,6 @@ Convention:
 """
 
 import json
-import os
-import tempfile
 import tomllib
 from pathlib import Path
 
@@ -33,6 +31,8 @@ from scipy.spatial.transform import Rotation
 
 from .camera import PinholeCamera, camera_from_dict
 from .errors import ZoopraxisError
+from .inputs import check_regular_file, read_json
+from .outputs import write_text
 
 FORMATS = {".json": "calibration.json", ".toml": "Pose2Sim / anipose TOML"}
 
@@ -66,13 +66,15 @@ def read_calibration(path):
         accepted = ", ".join(f"{ext} ({what})" for ext, what in FORMATS.items())
         raise ZoopraxisError(
             f"{path}: unknown calibration format '{path.suffix}' (accepted: {accepted})")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ZoopraxisError(f"{path}: calibration file not found") from None
-    except (OSError, UnicodeDecodeError) as error:
-        raise ZoopraxisError(f"{path}: cannot read calibration file ({error})") from None
-    cameras = _read_json(text, path) if suffix == ".json" else _read_toml(text, path)
+    if suffix == ".json":
+        cameras = _read_json(read_json(path, "calibration file"), path)
+    else:
+        check_regular_file(path, "calibration file")
+        try:
+            text = path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as error:
+            raise ZoopraxisError(f"{path}: cannot read calibration file ({error})") from None
+        cameras = _read_toml(text, path)
     if not cameras:
         raise ZoopraxisError(f"{path}: no cameras in calibration file")
     by_name = {}
@@ -83,13 +85,7 @@ def read_calibration(path):
     return by_name
 
 
-def _read_json(text, path):
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as error:
-        raise ZoopraxisError(
-            f"{path}: malformed JSON at line {error.lineno}, column {error.colno}: {error.msg}"
-        ) from None
+def _read_json(data, path):
     if not isinstance(data, dict):
         raise ZoopraxisError(f"{path}: expected a JSON object with key 'cameras'")
     if "cameras" not in data:
@@ -106,6 +102,8 @@ def _read_toml(text, path):
     except tomllib.TOMLDecodeError as error:
         # tomllib's message already ends with "(at line L, column C)".
         raise ZoopraxisError(f"{path}: malformed TOML: {error}") from None
+    except RecursionError:
+        raise ZoopraxisError(f"{path}: malformed TOML: nested too deep") from None
     cameras = []
     for table_name, table in data.items():
         if table_name == "metadata" or not isinstance(table, dict):
@@ -178,20 +176,7 @@ def write_calibration(path, cameras, *, force=False):
     if path.exists() and not force:
         raise ZoopraxisError(f"{path}: already exists; pass force to overwrite it")
     text = json.dumps({"cameras": [camera.to_dict() for camera in cameras]}, indent=2)
-    # Write beside the target and rename, so an interrupted write never leaves half a file.
-    try:
-        handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    except OSError as error:
-        raise ZoopraxisError(f"{path}: cannot write calibration file ({error})") from None
-    try:
-        with os.fdopen(handle, "w", encoding="utf-8") as stream:
-            stream.write(text + "\n")
-        os.replace(temporary, path)
-    except BaseException as error:
-        Path(temporary).unlink(missing_ok=True)
-        if isinstance(error, OSError):
-            raise ZoopraxisError(f"{path}: cannot write calibration file ({error})") from None
-        raise
+    write_text(path, text + "\n")
 
 
 def check_views(cameras, view_names, path):

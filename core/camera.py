@@ -39,7 +39,7 @@ def _as_array(value, shape, what):
     """``value`` as a finite float64 array of ``shape``, or ZoopraxisError naming ``what``."""
     try:
         a = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise ZoopraxisError(f"{what} must be numbers, got {value!r:.80}") from None
     if shape is not None and a.shape != shape:
         raise ZoopraxisError(f"{what} must have shape {shape}, got shape {a.shape}")

@@ -1,7 +1,6 @@
 """``zoopraxis calibrate``: cameras from a checkerboard or ChArUco board seen in the plates."""
 
 import argparse
-from pathlib import Path
 
 from .cli_common import add_output_arguments, check_output, open_plates, parse_view_values
 from .errors import ZoopraxisError
@@ -46,9 +45,9 @@ def main(argv):
     from .plates import parse_frame_range
 
     args = build_parser().parse_args(argv)
-    if Path(args.out).suffix.lower() != ".json":
-        raise ZoopraxisError(f"{args.out}: calibration is written as JSON; use a .json file name")
-    out = check_output(args.out, args.force)
+    out = check_output(args.out, args.force, suffixes=(".json",),
+                       inputs=[(f"--plate {view}", path)
+                               for view, path in parse_view_values(args.plate, "--plate").items()])
     board = cal.parse_board(args.board)
     max_rms = cal.MAX_RMS_PX if args.max_rms is None else args.max_rms
     if not max_rms > 0:

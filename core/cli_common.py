@@ -152,23 +152,25 @@ def check_template(name):
     return name
 
 
-def check_output(path, force):
-    """The output path as a Path; refuses to replace an existing file without --force."""
-    from pathlib import Path
+def check_output(path, force, inputs=(), suffixes=None):
+    """``--out`` as a Path, checked before any work (:func:`outputs.check_output`): not a
+    folder, none of ``inputs`` (``(option, path)`` pairs), writable, and an existing file
+    replaced only with --force."""
+    from . import outputs
 
-    path = Path(path)
-    if path.exists() and not force:
-        raise ZoopraxisError(f"{path}: file exists (use --force to replace it)")
-    return path
+    return outputs.check_output(path, force, inputs=inputs, suffixes=suffixes)
 
 
 def open_plates(paths, fps=None):
     """Open ``{view: path}`` plates; returns ``{view: Plate}`` (one-line errors per path)."""
     from .plates import open_plate
+    from .plausible import check_frame_rates
 
     if not paths:
         raise ZoopraxisError("give at least one --plate VIEW=PATH")
-    return {name: open_plate(path, name=name, fps=fps) for name, path in paths.items()}
+    plates = {name: open_plate(path, name=name, fps=fps) for name, path in paths.items()}
+    check_frame_rates({name: plate.fps for name, plate in plates.items()})
+    return plates
 
 
 def add_dims_argument(parser):
@@ -187,18 +189,14 @@ def read_dims(path, template):
     ZoopraxisError
         An unreadable file, one without a body, or a body of another template.
     """
-    import json
     from pathlib import Path
 
     from .body import LENGTH_DIMS
+    from .inputs import read_json
+    from .plausible import check_body_dims
 
     path = Path(path)
-    try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise ZoopraxisError(f"{path}: no such file") from None
-    except (OSError, ValueError) as error:
-        raise ZoopraxisError(f"{path}: not readable JSON ({error})") from None
+    data = read_json(path, "file")
     # init.json keeps the body's template and lengths at the top, result.json under "body"
     body = data.get("body", data) if isinstance(data, dict) else None
     if not isinstance(body, dict) or data.get("format") not in ("zoopraxis-init/1",
@@ -208,11 +206,8 @@ def read_dims(path, template):
     if body.get("template", "full") != template:
         raise ZoopraxisError(f"{path}: dimensions of the '{body.get('template', 'full')}' "
                              f"body, not of '{template}'")
-    try:
-        dims = {name: float(body["dims"][name]) for name in LENGTH_DIMS
-                if name in body["dims"]}
-    except (TypeError, ValueError):
-        raise ZoopraxisError(f"{path}: body dimensions are not numbers") from None
-    if not dims or not all(v > 0 for v in dims.values()):
-        raise ZoopraxisError(f"{path}: no positive body lengths")
-    return dims
+    dims = {name: body["dims"][name] for name in LENGTH_DIMS if name in body["dims"]}
+    if not dims:
+        raise ZoopraxisError(f"{path}: no body lengths")
+    check_body_dims(dims, path)
+    return {name: float(value) for name, value in dims.items()}

@@ -45,9 +45,14 @@ def main(argv):
     from .cli_common import open_plates
     from .initialize import initialize
     from .markers import check_markers, read_markers
+    from .outputs import write_text
+    from .plausible import check_calibration
 
     args = build_parser().parse_args(argv)
-    out = check_output(args.out, args.force)
+    out = check_output(args.out, args.force, inputs=[
+        ("--markers", args.markers), ("--calibration", args.calibration),
+        ("--dims-from", args.dims_from), ("--pose-prior", args.pose_prior),
+        *((f"--plate {view}", path) for view, path in parse_plate_options(args.plate).items())])
     check_template(args.template)
     flips = parse_flips(args.flip)
     camera_tilt = parse_camera_tilt(args.camera_tilt)
@@ -57,7 +62,8 @@ def main(argv):
     plates = open_plates(parse_plate_options(args.plate))
     views = list(plates)
     anchors = read_markers(args.markers)
-    check_markers(anchors, views, min(p.num_frames for p in plates.values()), args.markers)
+    check_markers(anchors, views, min(p.num_frames for p in plates.values()), args.markers,
+                  image_sizes={v: p.image_size for v, p in plates.items()})
     if args.calibration:
         cameras = check_views(read_calibration(args.calibration), views, args.calibration)
         for name, camera in cameras.items():
@@ -66,6 +72,8 @@ def main(argv):
                     f"{args.calibration}: camera '{name}' is {camera.image_size[0]}x"
                     f"{camera.image_size[1]} but plate '{name}' is {plates[name].image_size[0]}x"
                     f"{plates[name].image_size[1]}")
+        for warning in check_calibration(cameras, anchors, args.calibration):
+            print(f"warning: {warning}")
     else:
         cameras = {name: plate.image_size for name, plate in plates.items()}
     mode = "calibrated" if args.calibration else "uncalibrated"
@@ -96,10 +104,6 @@ def main(argv):
         options = " ".join(f"--flip {frame}:{p.replace(' ', '-')}" for p in parts)
         print(f"frame {frame}: look at the fitted body; if it is wrong there, run again with "
               f"{options}")
-    text = json.dumps(result.to_json(), indent=1)
-    try:
-        out.write_text(text + "\n")
-    except OSError as error:
-        raise ZoopraxisError(f"{out}: cannot write ({error.strerror})") from None
+    write_text(out, json.dumps(result.to_json(), indent=1) + "\n")
     print(f"wrote {out}")
     return 0

@@ -52,21 +52,17 @@ def read_take_joints(path):
 
         return standard_joints(load_cmu(path, fps=30.0))
     if suffix == ".json":
-        import json
-
+        from .inputs import read_json
         from .joints import STANDARD_JOINTS
         from .result import read_result
 
-        try:
-            data = json.loads(path.read_text())
-        except (OSError, ValueError) as error:
-            raise ZoopraxisError(f"{path}: not readable JSON ({error})") from None
+        data = read_json(path, "take")
         if isinstance(data, dict) and data.get("format") == "zoopraxis-truth/1":
             # zoopraxis synth's ground truth: the result.json layout without statuses
             try:
                 order = [list(data["joints"]).index(j) for j in STANDARD_JOINTS]
                 X = np.asarray(data["joints3d"], float)[:, order]
-            except (KeyError, ValueError, IndexError, TypeError) as error:
+            except (KeyError, ValueError, IndexError, TypeError, OverflowError) as error:
                 raise ZoopraxisError(f"{path}: malformed truth file ({error})") from None
             return X
         result = read_result(path)
@@ -81,9 +77,11 @@ def main(argv):
     import numpy as np
 
     from .initialize import PosePrior, take_angles
+    from .outputs import replacing
 
     args = build_parser().parse_args(argv)
-    out = check_output(args.out, args.force)
+    out = check_output(args.out, args.force,
+                       inputs=[("take", take) for take in args.takes], suffixes=(".npz",))
     check_template(args.template)
     if args.step < 1:
         raise ZoopraxisError(f"--step {args.step}: give 1 or more")
@@ -112,7 +110,8 @@ def main(argv):
         if not angles:
             return 130
     prior = PosePrior.from_takes(angles, args.template)
-    prior.save(out)
+    with replacing(out) as temporary:
+        prior.save(temporary)
     takes = f"{len(angles)} take{'s' if len(angles) > 1 else ''}"
     print(f"prior: {len(prior.samples)} poses (with mirror images) of {takes} -> {out}")
     return 130 if cancelled else 0

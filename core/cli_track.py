@@ -55,11 +55,14 @@ def build_parser():
 
 def main(argv):
     from . import calibfile, markers, plates
-    from .result import write_result
+    from .plausible import check_calibration, check_working_size
 
     args = build_parser().parse_args(argv)
-    out = check_output(args.out, args.force)
     paths = parse_view_values(args.plate, "--plate")
+    out = check_output(args.out, args.force, inputs=[
+        ("--markers", args.markers), ("--calibration", args.calibration),
+        ("--dims-from", args.dims_from), ("--pose-prior", args.pose_prior),
+        *((f"--plate {view}", path) for view, path in paths.items())])
     offsets = parse_view_values(args.offset, "--offset", int)
     unknown = [v for v in offsets if v not in paths]
     if unknown:
@@ -68,11 +71,19 @@ def main(argv):
     n = plates.check_same_length(opened, offsets)
     frames = plates.parse_frame_range(args.frames, n)
     anchors = markers.read_markers(args.markers)
-    markers.check_markers(anchors, list(opened), n, path=args.markers)
+    markers.check_markers(anchors, list(opened), n, path=args.markers,
+                          image_sizes={v: p.image_size for v, p in opened.items()})
     cameras = None
     if args.calibration:
         cameras = calibfile.check_views(calibfile.read_calibration(args.calibration),
                                         list(opened), args.calibration)
+        for warning in check_calibration(cameras, anchors, args.calibration):
+            print(f"track: warning: {warning}", flush=True)
+    else:
+        anchors = _placeable_views(opened, offsets, anchors, n, args.markers)
+    for warning in check_working_size(anchors, {v: p.image_size for v, p in opened.items()},
+                                      args.max_size):
+        print(f"track: warning: {warning}", flush=True)
     if args.workers < 0:
         raise ZoopraxisError(f"--workers {args.workers}: give 0 (one per core) or more")
     if args.refine_body and args.tracker != "differential":
@@ -109,7 +120,7 @@ def main(argv):
                                      "version; use --tracker differential") from None
             result = hybrid.track(opened, anchors, cameras, tracker=args.tracker,
                                   particles=args.particles, seed=args.seed, **kwargs)
-    write_result(out, result, force=args.force)
+    _write_or_rescue(out, result, args.force)
     elapsed = time.perf_counter() - t0
     counts = {s: result.status.count(s) for s in ("ok", "uncertain", "lost")}
     print(f"track: {result.num_frames} frames in {elapsed:.1f} s "
@@ -119,6 +130,46 @@ def main(argv):
         print(f"track: cancelled; the {result.num_frames} frames tracked are in {out}")
         return 130
     return 0
+
+
+def _placeable_views(opened, offsets, anchors, num_frames, path):
+    """Uncalibrated: leave out (with a warning) the plates of views with too few clicks at the
+    first anchor to place their camera; returns the anchors of the views kept."""
+    from . import markers
+
+    kept, warnings = markers.uncalibrated_views(anchors, list(opened), path)
+    for warning in warnings:
+        print(f"track: warning: {warning}", flush=True)
+    if len(kept) == len(opened):
+        return anchors
+    for view in [v for v in opened if v not in kept]:
+        opened.pop(view).close()
+        offsets.pop(view, None)
+    anchors = markers.only_views(anchors, kept)
+    markers.check_markers(anchors, kept, num_frames, path=path)
+    return anchors
+
+
+def _write_or_rescue(out, result, force):
+    """Write result.json; when that fails after the work (a disk filled up meanwhile), keep
+    the frames in a file of the system's temporary folder and name it in the error."""
+    import os
+    import tempfile
+
+    from .result import write_result
+
+    try:
+        write_result(out, result, force=force)
+    except ZoopraxisError as error:
+        handle, rescue = tempfile.mkstemp(prefix="zoopraxis-track-", suffix=".json")
+        os.close(handle)
+        try:
+            write_result(rescue, result, force=True)
+        except ZoopraxisError:
+            os.unlink(rescue)
+            raise error from None
+        raise ZoopraxisError(f"{error}; the {result.num_frames} frames tracked are saved in "
+                             f"{rescue}") from None
 
 
 class _StopOnInterrupt:

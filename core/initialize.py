@@ -46,6 +46,7 @@ are increments ``exp(w) @ R_start`` on the left (spatial), like ``Pose.retract``
 """
 
 import copy
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -305,8 +306,11 @@ class PosePrior:
             with np.load(path) as data:
                 angles, takes = data["angles"], data["takes"].astype(str)
                 names, template = data["dof_names"].astype(str), str(data["template"])
-        except (OSError, KeyError, ValueError) as exc:
-            raise ZoopraxisError(f"{path}: not a pose prior file ({exc})") from None
+        except (OSError, KeyError, ValueError, TypeError, EOFError, zipfile.BadZipFile) as exc:
+            raise ZoopraxisError(f"{path}: not a pose prior file ({str(exc)[:80]})") from None
+        if not (np.issubdtype(angles.dtype, np.number) and np.all(np.isfinite(angles))):
+            raise ZoopraxisError(f"{path}: not a pose prior file (angles are not finite "
+                                 "numbers)")
         keep = ~np.isin(takes, list(exclude))
         if not keep.any():
             raise ZoopraxisError(f"{path}: no poses left after leaving out "
@@ -1355,21 +1359,50 @@ class InitResult:
         }
 
 
+def read_init(path):
+    """Read an init.json file into an :class:`InitResult` (:func:`init_from_json`).
+
+    Raises
+    ------
+    ZoopraxisError
+        Not a regular file, not JSON, or not a well-formed init.json, naming the file.
+    """
+    from .inputs import read_json
+
+    return init_from_json(read_json(path, "init file"), path)
+
+
 def init_from_json(data, path="init.json"):
     """Rebuild an :class:`InitResult` from the JSON object of an init.json file.
 
     Raises
     ------
     ZoopraxisError
-        A missing key or a wrong format, naming the file.
+        A missing key, a wrong format or a value of the wrong type, naming the file.
     """
+    try:
+        return _init_from_json(data, path)
+    except ZoopraxisError as error:
+        if str(error).startswith(str(path)):
+            raise
+        raise ZoopraxisError(f"{path}: {error}") from None
+    except (TypeError, ValueError, AttributeError, KeyError, IndexError, OverflowError) as error:
+        raise ZoopraxisError(f"{path}: malformed init file ({type(error).__name__}: "
+                             f"{str(error)[:80]})") from None
+
+
+def _init_from_json(data, path):
     from .camera import camera_from_dict
+    from .plausible import check_body_dims
 
     if not isinstance(data, dict) or data.get("format") != "zoopraxis-init/1":
         raise ZoopraxisError(f"{path}: not a zoopraxis-init/1 file")
     for key in ("mode", "template", "dims", "anchors"):
         if key not in data:
             raise ZoopraxisError(f"{path}: missing required key '{key}'")
+    if not isinstance(data["dims"], dict) or not isinstance(data["anchors"], list):
+        raise ZoopraxisError(f"{path}: 'dims' must be an object and 'anchors' a list")
+    check_body_dims(data["dims"], path)
     body = make_body(data["template"], data["dims"])
     poses, view_cameras, errors = {}, {}, {}
     for a in data["anchors"]:
@@ -1378,6 +1411,8 @@ def init_from_json(data, path="init.json"):
                 raise ZoopraxisError(f"{path}: an anchor misses key '{key}'")
         f = int(a["frame"])
         vector = np.asarray(a["pose"], float)
+        if not np.all(np.isfinite(vector)):
+            raise ZoopraxisError(f"{path}: frame {f}: pose holds NaN or infinity")
         if vector.shape != (6 + body.n_dofs,):
             raise ZoopraxisError(f"{path}: frame {f}: pose has {vector.size} numbers, the "
                                  f"'{body.template}' body needs {6 + body.n_dofs}")
@@ -1541,6 +1576,10 @@ def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None,
         pose_prior.with_broad(kin.prior_mean, kin.prior_sigma)
     fit.flips = flips
     result = fit.run()
+    if calibrated:
+        from .plausible import fit_rms_warnings
+
+        result.warnings.extend(fit_rms_warnings(result.rms, {v: cameras[v] for v in views}))
     if fit_dims and all(_seen_twice(a, views) < _MIN_FRAME_JOINTS for a in anchors):
         result.notes.append(ONE_VIEW_LENGTHS_NOTE)
     return result
@@ -2699,6 +2738,6 @@ def refine_dims(body, poses_by_frame, observations, cameras, *, weights=None, fi
 
 __all__ = ["initialize", "InitResult", "PosePrior", "default_pose_prior", "mirror_angles",
            "take_angles", "resolve_pose_prior",
-           "init_from_json", "refine_dims", "RefineResult",
+           "init_from_json", "read_init", "refine_dims", "RefineResult",
            "triangulate", "similarity_from_points", "procrustes_mpjpe", "LR_PAIRS",
            "LOSS_SCALE_PX", "DIMS_RANGE"]

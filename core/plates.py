@@ -13,6 +13,7 @@ import functools
 import math
 import operator
 import re
+import stat
 from collections import OrderedDict
 from pathlib import Path
 
@@ -20,6 +21,7 @@ import cv2
 import numpy as np
 
 from .errors import ZoopraxisError
+from .inputs import file_mode
 
 IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")
 EXR_EXTENSION = ".exr"
@@ -376,8 +378,11 @@ def open_plate(path, *, name=None, fps=None, cache_size=DEFAULT_CACHE_SIZE):
         fps = float(fps)
         if not (math.isfinite(fps) and fps > 0):
             raise ZoopraxisError(f"fps of plate {path} must be positive, got {fps}")
-    if not path.exists():
-        raise ZoopraxisError(f"plate not found: {path}")
+    mode = file_mode(path, "plate")
+    if not (stat.S_ISDIR(mode) or stat.S_ISREG(mode)):
+        # Opening a named pipe blocks until a writer comes, deaf to Ctrl-C: never try.
+        raise ZoopraxisError(f"plate {path} is not a regular file or folder (a pipe or a "
+                             "device?); a plate is a video file or a folder of images")
     if path.is_dir():
         return _FolderPlate(path, name or path.name, fps, cache_size, _list_images(path))
     if path.suffix.lower() in IMAGE_EXTENSIONS + (EXR_EXTENSION,):
@@ -388,7 +393,10 @@ def open_plate(path, *, name=None, fps=None, cache_size=DEFAULT_CACHE_SIZE):
 
 def _list_images(folder):
     """Image files of a folder in natural order; ZoopraxisError when there are none."""
-    candidates = [p for p in folder.iterdir() if not p.name.startswith(".") and p.is_file()]
+    try:
+        candidates = [p for p in folder.iterdir() if not p.name.startswith(".") and p.is_file()]
+    except OSError as error:
+        raise ZoopraxisError(f"plate folder {folder}: cannot list it ({error.strerror})") from None
     has_exr = any(p.suffix.lower() == EXR_EXTENSION for p in candidates)
     # Probe EXR only when there is some: the probe makes OpenCV log a warning if disabled.
     accepted = accepted_extensions() if has_exr else IMAGE_EXTENSIONS
@@ -399,7 +407,34 @@ def _list_images(folder):
                 if has_exr and not exr_supported() else "")
         names = ", ".join(e[1:] for e in accepted_extensions())
         raise ZoopraxisError(f"no images in folder {folder}{hint}; accepted: {names}")
+    for frame, file in enumerate(files):
+        _check_complete(file, frame)
     return files
+
+
+# A JPEG ends with the EOI marker; some writers append a few bytes (padding, a trailer) after.
+_JPEG_END = b"\xff\xd9"
+_JPEG_TAIL_BYTES = 4096
+
+
+def _check_complete(file, frame):
+    """Refuse an empty image file or a JPEG without its end marker (a copy cut short), which
+    libjpeg would decode with grey where the data stops and only a console warning."""
+    try:
+        size = file.stat().st_size
+        if size == 0:
+            raise ZoopraxisError(f"image {file} (frame {frame}) is empty")
+        if file.suffix.lower() not in (".jpg", ".jpeg"):
+            return
+        with open(file, "rb") as stream:
+            stream.seek(max(0, size - _JPEG_TAIL_BYTES))
+            tail = stream.read()
+    except OSError as error:
+        raise ZoopraxisError(f"image {file} (frame {frame}): cannot read "
+                             f"({error.strerror})") from None
+    if _JPEG_END not in tail:
+        raise ZoopraxisError(f"image {file} (frame {frame}) is cut off: the JPEG has no end "
+                             "marker (copy it again from the source)")
 
 
 def check_same_length(plates, offsets=None):

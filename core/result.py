@@ -8,14 +8,15 @@ result can be baked onto an armature without re-fitting.
 """
 
 import json
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from .errors import ZoopraxisError
+from .inputs import read_json
 from .joints import STANDARD_JOINTS
+from .outputs import write_text
 
 FORMAT = "zoopraxis-track/1"
 STATUSES = ("ok", "uncertain", "lost")
@@ -87,14 +88,12 @@ class TrackResult:
 
 
 def write_result(path, result, *, force=False):
-    """Write result.json atomically; refuses to replace a file unless ``force``."""
+    """Write result.json atomically (:func:`outputs.write_text`); refuses to replace a file
+    unless ``force``."""
     path = Path(path)
     if path.exists() and not force:
         raise ZoopraxisError(f"{path}: file exists (use --force to replace it)")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".part")
-    tmp.write_text(json.dumps(result.to_json()))
-    os.replace(tmp, path)
+    return write_text(path, json.dumps(result.to_json()))
 
 
 def _require(data, key, path):
@@ -103,62 +102,133 @@ def _require(data, key, path):
     return data[key]
 
 
-def read_result(path):
-    """Read and validate result.json into a :class:`TrackResult`."""
-    path = Path(path)
+def _numbers(value, shape, what, path):
+    """``value`` as a finite float array of ``shape`` (None: any), else one line naming it."""
     try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise ZoopraxisError(f"{path}: no such result file") from None
-    except json.JSONDecodeError as exc:
-        raise ZoopraxisError(f"{path}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
+        with np.errstate(all="ignore"):
+            a = np.asarray(value, float)
+    except (TypeError, ValueError, OverflowError):
+        raise ZoopraxisError(f"{path}: {what} must be an array of numbers (no strings, "
+                             "every row the same length)") from None
+    if shape is not None and a.shape != shape:
+        raise ZoopraxisError(f"{path}: {what} has shape {a.shape}, expected {shape}")
+    if not np.all(np.isfinite(a)):
+        index = tuple(int(i) for i in np.argwhere(~np.isfinite(a))[0])
+        raise ZoopraxisError(f"{path}: {what} holds NaN or infinity (at {list(index)})")
+    return a
+
+
+def _strings(value, what, path):
+    if not isinstance(value, list) or not all(isinstance(x, str) for x in value):
+        raise ZoopraxisError(f"{path}: '{what}' must be a list of strings")
+    return value
+
+
+def _check_body(body, path):
+    """The result's body: known template and shapes, finite lengths of a person."""
+    from .body import DIM_NAMES, TEMPLATES
+    from .plausible import check_body_dims, finite_number
+
+    if not isinstance(body, dict):
+        raise ZoopraxisError(f"{path}: 'body' must be an object")
+    template = body.get("template", "full")
+    if template not in TEMPLATES:
+        raise ZoopraxisError(f"{path}: body template {template!r:.40} is not one of "
+                             f"{', '.join(TEMPLATES)}")
+    if body.get("shapes", "ellipsoid") not in ("ellipsoid", "cylinder"):
+        raise ZoopraxisError(f"{path}: body shapes {body['shapes']!r:.40} are not ellipsoid "
+                             "or cylinder")
+    dims = body.get("dims", {})
+    if not isinstance(dims, dict):
+        raise ZoopraxisError(f"{path}: body 'dims' must map names to metres")
+    for name, value in dims.items():
+        if name not in DIM_NAMES:
+            raise ZoopraxisError(f"{path}: unknown body dimension '{name}'")
+        if not finite_number(value) or value < 0:
+            raise ZoopraxisError(f"{path}: body dimension '{name}' must be a positive number, "
+                                 f"got {value!r:.40}")
+    check_body_dims(dims, path)
+    if "dof_names" in body:
+        _strings(body["dof_names"], "body dof_names", path)
+    return body
+
+
+def read_result(path):
+    """Read and validate result.json into a :class:`TrackResult`.
+
+    Raises
+    ------
+    ZoopraxisError
+        Whatever is wrong with the file, naming it and the key, view or frame: not a regular
+        file, not JSON, a missing key, a value of the wrong type or shape, NaN or infinity,
+        a frame rate that is not positive, a body outside human range.
+    """
+    from .plausible import finite_number
+
+    path = Path(path)
+    data = read_json(path, "result file")
     if not isinstance(data, dict):
         raise ZoopraxisError(f"{path}: expected a JSON object")
     fmt = _require(data, "format", path)
     if fmt != FORMAT:
-        raise ZoopraxisError(f"{path}: format '{fmt}' is not '{FORMAT}'")
+        raise ZoopraxisError(f"{path}: format {fmt!r:.40} is not '{FORMAT}'")
     mode = _require(data, "mode", path)
     if mode not in MODES:
-        raise ZoopraxisError(f"{path}: mode '{mode}' is not one of {', '.join(MODES)}")
-    fps = float(_require(data, "fps", path))
-    names = _require(data, "joints", path)
+        raise ZoopraxisError(f"{path}: mode {mode!r:.40} is not one of {', '.join(MODES)}")
+    fps = _require(data, "fps", path)
+    if not finite_number(fps) or not 0 < fps <= 10000:
+        raise ZoopraxisError(f"{path}: 'fps' must be a positive number of frames per second, "
+                             f"got {fps!r:.40}")
+    names = _strings(_require(data, "joints", path), "joints", path)
     missing = [j for j in STANDARD_JOINTS if j not in names]
     if missing:
         raise ZoopraxisError(f"{path}: joint '{missing[0]}' is missing from 'joints'")
     order = [names.index(j) for j in STANDARD_JOINTS]
-    frames = np.asarray(_require(data, "frames", path), dtype=int)
+    frames = _require(data, "frames", path)
+    if not isinstance(frames, list) or not all(
+            isinstance(f, int) and not isinstance(f, bool) and 0 <= f < 2 ** 31 for f in frames):
+        raise ZoopraxisError(f"{path}: 'frames' must be a list of frame numbers >= 0")
+    frames = np.asarray(frames, dtype=int).reshape(-1)
     F = len(frames)
-    joints3d = np.asarray(_require(data, "joints3d", path), float)
-    if joints3d.shape != (F, len(names), 3):
-        raise ZoopraxisError(f"{path}: 'joints3d' has shape {joints3d.shape}, expected "
-                             f"({F}, {len(names)}, 3)")
-    status = list(_require(data, "status", path))
+    joints3d = _numbers(_require(data, "joints3d", path), (F, len(names), 3), "'joints3d'", path)
+    status = _strings(_require(data, "status", path), "status", path)
     if len(status) != F:
         raise ZoopraxisError(f"{path}: 'status' has {len(status)} entries for {F} frames")
     bad = [s for s in status if s not in STATUSES]
     if bad:
-        raise ZoopraxisError(f"{path}: unknown status '{bad[0]}' (expected ok, uncertain or lost)")
+        raise ZoopraxisError(f"{path}: unknown status {bad[0]!r:.40} (expected ok, uncertain "
+                             "or lost)")
+    views = _require(data, "views", path)
+    if not isinstance(views, dict):
+        raise ZoopraxisError(f"{path}: 'views' must map view names to their joints2d and "
+                             "residual")
     joints2d, residual = {}, {}
-    for view, d in _require(data, "views", path).items():
-        uv = np.asarray(_require(d, "joints2d", f"{path}: view '{view}'"), float)
-        if uv.shape != (F, len(names), 2):
-            raise ZoopraxisError(f"{path}: view '{view}': 'joints2d' has shape {uv.shape}")
+    for view, d in views.items():
+        where = f"view '{view}'"
+        if not isinstance(d, dict):
+            raise ZoopraxisError(f"{path}: {where} must be an object with joints2d and residual")
+        uv = _numbers(_require(d, "joints2d", f"{path}: {where}"), (F, len(names), 2),
+                      f"{where}: 'joints2d'", path)
         joints2d[view] = uv[:, order]
-        res = np.asarray(_require(d, "residual", f"{path}: view '{view}'"), float)
-        if res.shape != (F,):
-            raise ZoopraxisError(f"{path}: view '{view}': 'residual' has {res.size} values "
-                                 f"for {F} frames")
-        residual[view] = res
+        residual[view] = _numbers(_require(d, "residual", f"{path}: {where}"), (F,),
+                                  f"{where}: 'residual'", path)
+    body = _check_body(data["body"], path) if data.get("body") is not None else None
     known = {"format", "mode", "fps", "joints", "frames", "joints3d", "views", "status", "body",
              "roots", "angles", "spread"}
-    result = TrackResult(mode=mode, fps=fps, frames=frames, joints3d=joints3d[:, order],
-                         joints2d=joints2d, residual=residual, status=status,
-                         body=data.get("body"),
+    result = TrackResult(mode=mode, fps=float(fps), frames=frames,
+                         joints3d=joints3d[:, order], joints2d=joints2d, residual=residual,
+                         status=status, body=body,
                          extra={k: v for k, v in data.items() if k not in known})
     for key in ("roots", "angles", "spread"):
-        if key in data:
-            arr = np.asarray(data[key], float)
-            if len(arr) != F:
-                raise ZoopraxisError(f"{path}: '{key}' has {len(arr)} entries for {F} frames")
+        if data.get(key) is not None:
+            arr = _numbers(data[key], None, f"'{key}'", path)
+            if arr.ndim != (3 if key == "roots" else 2) or len(arr) != F:
+                raise ZoopraxisError(f"{path}: '{key}' has shape {arr.shape} for {F} frames")
+            if key == "roots" and arr.shape[1:] != (4, 4):
+                raise ZoopraxisError(f"{path}: 'roots' must hold a 4x4 matrix per frame")
             setattr(result, key, arr)
+    names = (body or {}).get("dof_names")
+    if result.angles is not None and names is not None and result.angles.shape[1] != len(names):
+        raise ZoopraxisError(f"{path}: 'angles' has {result.angles.shape[1]} values per frame "
+                             f"for {len(names)} body DOFs")
     return result

@@ -155,7 +155,7 @@ def test_json_bad_content(tmp_path, data, message):
 def test_malformed_json_names_file_and_line(tmp_path):
     path = tmp_path / "calib.json"
     path.write_text('{"cameras": [\n  {"name": "cam0",\n   "K": [1, 2,,]}\n]}', encoding="utf-8")
-    with pytest.raises(ZoopraxisError, match=r"calib\.json: malformed JSON at line 3"):
+    with pytest.raises(ZoopraxisError, match=r"calib\.json: not valid JSON \(.* at line 3,"):
         read_calibration(path)
 
 
@@ -169,7 +169,7 @@ def test_unknown_extension_lists_accepted_ones(tmp_path):
 
 
 def test_missing_file(tmp_path):
-    with pytest.raises(ZoopraxisError, match=r"nowhere\.json: calibration file not found"):
+    with pytest.raises(ZoopraxisError, match=r"nowhere\.json: no such calibration file"):
         read_calibration(tmp_path / "nowhere.json")
 
 

@@ -253,7 +253,7 @@ def test_to_gray_float_rejects_bad_input():
 # --- errors a user can fix ---------------------------------------------------------------
 
 def test_missing_path(tmp_path):
-    with pytest.raises(ZoopraxisError, match="plate not found: .*nowhere"):
+    with pytest.raises(ZoopraxisError, match="nowhere: no such plate"):
         open_plate(tmp_path / "nowhere")
 
 

@@ -103,7 +103,8 @@ def test_result_joint_order_is_by_name(tmp_path):
     (lambda d: d.update(mode="guess"), "mode 'guess'"),
     (lambda d: d["joints"].remove("l_knee"), "joint 'l_knee' is missing"),
     (lambda d: d.update(status=["ok", "ok", "maybe"]), "unknown status 'maybe'"),
-    (lambda d: d["views"]["cam0"].update(residual=[0.0]), "view 'cam0': 'residual' has 1"),
+    (lambda d: d["views"]["cam0"].update(residual=[0.0]),
+     r"view 'cam0': 'residual' has shape \(1,\)"),
 ])
 def test_result_errors(tmp_path, change, message):
     data = make_result().to_json()
