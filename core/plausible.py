@@ -20,6 +20,8 @@ from .joints import STANDARD_JOINTS
 # Body lengths of people, as multiples of the template's adult defaults: wider than the fit's
 # own bounds (initialize.DIMS_RANGE) so any fitted body passes, far narrower than a unit slip.
 HUMAN_LENGTH_RANGE = (0.4, 2.5)
+# Lengths whose default is under this (metres) are only held below the range's top.
+SHORT_LENGTH = 0.15
 
 # The clicked joints of one frame span at most this many metres (a tall person reaching up)
 # and at least this many (a child curled up); outside it the cameras are in the wrong units.
@@ -74,7 +76,10 @@ def check_body_dims(dims, where):
         value = dims[name]
         if not finite_number(value):
             raise ZoopraxisError(f"{where}: body length '{name}' is not a number: {value!r:.40}")
-        low, high = lo * DEFAULT_DIMS[name], hi * DEFAULT_DIMS[name]
+        # short lengths (shoulder drop, ankle height, ...) are set by where joints are
+        # clicked and may come out near zero
+        low = lo * DEFAULT_DIMS[name] if DEFAULT_DIMS[name] >= SHORT_LENGTH else 0.0
+        high = hi * DEFAULT_DIMS[name]
         if not low <= value <= high:
             raise ZoopraxisError(f"{where}: body length '{name}' of {value:g} m is outside the "
                                  f"human range ({low:.2f}-{high:.2f} m); are the lengths in "

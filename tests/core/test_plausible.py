@@ -84,8 +84,11 @@ def test_a_poor_camera_is_warned_about(take, tmp_path):
 def test_body_lengths_outside_human_range(tmp_path):
     plausible.check_body_dims(dict(DEFAULT_DIMS), "init.json")
     plausible.check_body_dims({"thigh": 0.30, "forearm": 0.20}, "init.json")
+    # a shoulder drop is where the shoulders were clicked: near zero is a body too
+    plausible.check_body_dims({"shoulder_drop": 0.005, "ankle_height": 0.01}, "init.json")
     for name, value, message in (("thigh", 50.0, "'thigh' of 50 m is outside the human range"),
                                  ("shank", 0.001, "'shank' of 0.001 m"),
+                                 ("shoulder_drop", 50.0, "'shoulder_drop' of 50 m"),
                                  ("torso", float("nan"), "'torso' is not a number"),
                                  ("torso", 10 ** 400, "'torso' is not a number")):
         with pytest.raises(ZoopraxisError, match="init.json: body length " + message):
