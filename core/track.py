@@ -1051,10 +1051,8 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
         if cancelled:
             log("cancelled: keeping the first round's track")
             states, reports = first
-        else:
-            refined = tracked_backgrounds(tracker, source, views, frames, states, use_bg)
     if refined is not None:
-        # each frame's status against the backgrounds without the person in them
+        # each frame's status against the backgrounds without the (first round's) body
         ref_fit, ref_iou, ref_unexplained = remeasure(
             tracker, source, states, reports, anchor_frames, refined, use_bg, limbs=calibrated)
 
