@@ -737,7 +737,7 @@ class DifferentialTracker:
             if acc is not None and acc.inside.any():
                 residual[c] = 255.0 * np.mean(np.abs(acc.residual[acc.inside]))
             if images_t1[c].foreground is not None:
-                iou[c] = silhouette_iou(renders[c].label >= 0, images_t1[c].person)
+                iou[c] = silhouette_iou(renders[c].label >= 0, images_t1[c].foreground)
                 coverage[c] = model_coverage(renders[c].label >= 0, images_t1[c].foreground)
         return state, StepReport(residual, iou, cost, total_iters, renders, coverage)
 

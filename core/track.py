@@ -351,7 +351,7 @@ def take_backgrounds(tracker, source, views, frames, inside, state_at, log):
         fg = bg.foreground(colour0[c])
         person = bg.person(colour0[c], fg)
         ref_fit[c] = model_coverage(r0[c].label >= 0, fg)
-        ref_iou[c] = max(silhouette_iou(r0[c].label >= 0, person), 0.05)
+        ref_iou[c] = max(silhouette_iou(r0[c].label >= 0, fg), 0.05)
         if ref_fit[c] < MIN_ANCHOR_FIT:
             use_bg[c] = False
             log(f"view '{views[c]}': only {ref_fit[c]:.0%} of the model lies in the "
@@ -449,7 +449,7 @@ def silhouette_measures(tracker, state, colours, backgrounds, use_bg, limbs=Fals
             fg = backgrounds[c].foreground(img)
             person = backgrounds[c].person(img, fg)
             fit[c] = model_coverage(renders[c].label >= 0, fg)
-            iou[c] = silhouette_iou(renders[c].label >= 0, person)
+            iou[c] = silhouette_iou(renders[c].label >= 0, fg)
             unexplained[c] = unexplained_fraction(person, renders[c].label,
                                                   backgrounds[c].known)
             if limbs:
