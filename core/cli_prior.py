@@ -23,8 +23,9 @@ def build_parser():
                     "and track) from the poses of motion capture (CMU BVH) or of tracked takes "
                     "(result.json; lost frames left out), with their mirror images.")
     p.add_argument("takes", nargs="+", metavar="TAKE",
-                   help="a BVH capture with a CMU skeleton, a Zoopraxis result.json or a "
-                        "truth.json of 'zoopraxis synth'")
+                   help="a capture with a CMU skeleton (BVH of any CMU naming, or AMC with its "
+                        "ASF beside it), a Zoopraxis result.json or a truth.json of "
+                        "'zoopraxis synth'")
     p.add_argument("--step", type=int, default=4,
                    help="use every STEP-th frame (BVH at 30 fps; default 4)")
     p.add_argument("--template", default="full", help="body template (default full)")
@@ -47,10 +48,10 @@ def read_take_joints(path):
     if not path.is_file():
         raise ZoopraxisError(f"{path}: no such file")
     suffix = path.suffix.lower()
-    if suffix == ".bvh":
-        from .bvh import load_cmu, standard_joints
+    if suffix in (".bvh", ".amc"):
+        from .bvh import read_take
 
-        return standard_joints(load_cmu(path, fps=30.0))
+        return read_take(path).joints(fps=30.0)
     if suffix == ".json":
         import json
 
@@ -73,8 +74,8 @@ def read_take_joints(path):
         X = np.array(result.joints3d, float)
         X[np.array([s == "lost" for s in result.status], bool)] = np.nan
         return X
-    raise ZoopraxisError(f"{path}: not a take (expected a .bvh capture, a result.json or a "
-                         "truth.json)")
+    raise ZoopraxisError(f"{path}: not a take (expected a .bvh or .amc capture, a result.json "
+                         "or a truth.json)")
 
 
 def main(argv):
@@ -90,7 +91,8 @@ def main(argv):
     paths = [Path(t) for t in args.takes]
     names = {}
     for path in paths:
-        name = path.stem if path.suffix.lower() == ".bvh" else path.parent.name + "/" + path.stem
+        capture = path.suffix.lower() in (".bvh", ".amc")
+        name = path.stem if capture else path.parent.name + "/" + path.stem
         if name in names.values():
             name = str(path)
         names[path] = name

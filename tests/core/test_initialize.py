@@ -1048,3 +1048,13 @@ def test_init_command_fits_a_near_views_perspective(tmp_path, capsys):
     assert cli.main(calibrated) == 2
     err = capsys.readouterr().err
     assert "--perspective is for uncalibrated views" in err and err.count("\n") == 1
+
+
+def test_prior_command_reads_every_cmu_convention(shared_data):
+    """``zoopraxis prior`` takes AMC captures (ASF beside them) and Daz-named BVH, at their
+    true rates: 60_10's header says 120 fps, its capture is 60."""
+    from zoopraxis.core.cli_prior import read_take_joints
+
+    more = shared_data / "cmu_more"
+    assert read_take_joints(more / "asf_amc" / "35_01.amc").shape == (90, 17, 3)
+    assert read_take_joints(more / "bvh_daz" / "60_10.bvh").shape == (599, 17, 3)
