@@ -901,4 +901,28 @@ def read_take(path, manifest=None):
         motion = replace(motion, data=motion.data[1:])
     skeleton = skeleton_of(motion)
     motion = motion.to_world(SKELETON_SCALE[skeleton], up="y")
-    return Take(path.stem, path.stem.split("_")[0], motion, skeleton)
+    return Take(path.stem, subject_of(path.stem), motion, skeleton)
+
+
+def capture_paths(*folders, hold_out=()):
+    """The captures (``.bvh``, ``.amc``) under the folders, sorted, without those of the
+    subjects ``hold_out`` (CMU's ``SUBJECT`` of ``SUBJECT_TRIAL``, as strings: ``"02"``).
+
+    Raises
+    ------
+    ZoopraxisError
+        A folder that does not exist.
+    """
+    paths = []
+    for folder in map(Path, folders):
+        if not folder.is_dir():
+            raise ZoopraxisError(f"{folder}: no such folder")
+        paths += [p for p in folder.rglob("*") if p.suffix.lower() in (".bvh", ".amc")]
+    held = {str(s) for s in hold_out}
+    return sorted((p for p in paths if subject_of(p.stem) not in held), key=str)
+
+
+def subject_of(take):
+    """The CMU subject of a take's name: ``"02"`` of ``"02_01"`` (the name itself if it has
+    no ``_``)."""
+    return str(take).split("_")[0]

@@ -2,8 +2,9 @@
 of motion at hand.
 
 One uncalibrated view cannot see whether a limb points towards the camera or away from it;
-the pose prior decides (``initialize``). The shipped prior knows a few CMU takes (walks, hops,
-playground jumps). A prior learned from captures of the motion being tracked (CMU BVH files)
+the pose prior decides (``initialize``). The shipped prior knows 80 CMU takes of 18 performers
+(``tools/learn_pose_prior.py``). A prior learned from captures of the motion being tracked
+(CMU BVH or AMC files)
 or from earlier tracks of it (result.json, say of a calibrated shoot of the same performer)
 knows that motion better; ``init`` and ``track`` take it with ``--pose-prior``.
 """

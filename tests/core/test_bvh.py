@@ -823,3 +823,16 @@ class TestFuzz:
         path = write(tmp_path, CHAIN.replace("OFFSET 0 0 2", "OFFSET 0 nan 2"))
         with pytest.raises(ZoopraxisError, match=r"bad\.bvh:16: .*'nan' is not a finite"):
             bvh.read_bvh(path)
+
+
+def test_capture_paths_hold_subjects_out(tmp_path):
+    for name in ("a/02_01.bvh", "a/02_02.bvh", "b/35_01.amc", "b/35.asf", "b/notes.txt",
+                 "131_01.bvh"):
+        (tmp_path / name).parent.mkdir(exist_ok=True)
+        (tmp_path / name).write_text("")
+    stems = [p.stem for p in bvh.capture_paths(tmp_path)]
+    assert sorted(stems) == ["02_01", "02_02", "131_01", "35_01"]
+    assert [p.stem for p in bvh.capture_paths(tmp_path, hold_out=["02", "131"])] == ["35_01"]
+    assert bvh.subject_of("135_04") == "135"
+    with pytest.raises(ZoopraxisError, match="nowhere: no such folder"):
+        bvh.capture_paths(tmp_path / "nowhere")
