@@ -200,3 +200,10 @@ def test_refine_body_bad_options_are_one_line(take, tmp_path, change, message):
     run = zoopraxis(*args)
     assert run.returncode == 2
     assert message in run.stderr and len(run.stderr.strip().splitlines()) == 1
+
+
+def test_walking_prior_is_for_the_particle_trackers(take, tmp_path):
+    run = zoopraxis(*track_args(take, tmp_path / "r.json", "--motion-prior", "walk"))
+    assert run.returncode == 2
+    assert "--motion-prior walk works with --tracker particle or hybrid only" in run.stderr
+    assert len(run.stderr.strip().splitlines()) == 1
