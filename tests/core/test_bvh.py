@@ -644,29 +644,24 @@ class TestAcclaim:
         radians = amc.read_amc(leg_files(tmp_path, radian_asf, radian_amc)).positions()
         np.testing.assert_allclose(radians, degrees, atol=1e-9)
 
-    @pytest.mark.parametrize("change, message", [
-        (("shank 35", "shank 35 1"), r"leg_01\.amc:7: bone shank has 2 values"),
-        (("thigh 40", "knee 40"), r"leg_01\.amc:6: no bone named 'knee'"),
-        (("shank 35", "shank nan"), r"leg_01\.amc:7: bone shank: 'nan' are not finite"),
-        (("1\nroot 1", "root 1"), r"leg_01\.amc:\d+: 'root' before the first frame"),
+    @pytest.mark.parametrize("file, change, message", [
+        ("amc", ("shank 35", "shank 35 1"), r"leg_01\.amc:7: bone shank has 2 values"),
+        ("amc", ("thigh 40", "knee 40"), r"leg_01\.amc:6: no bone named 'knee'"),
+        ("amc", ("shank 35", "shank nan"), r"leg_01\.amc:7: bone shank: 'nan' are not finite"),
+        ("amc", ("1\nroot 1", "root 1"), r"leg_01\.amc:\d+: 'root' before the first frame"),
+        ("asf", ("length 2", "length two"), r"leg\.asf:\d+: length: 'two' are not finite"),
+        ("asf", ("axis 10 0 0 XYZ", "axis 10 0 0 XYY"), r"leg\.asf:\d+: axis order 'XYY'"),
+        ("asf", ("thigh shank\n", "thigh foot\n"),
+         r"leg\.asf:\d+: hierarchy names unknown bone 'foot'"),
+        ("asf", ("    dof rx\n", "    dof tx\n"), r"leg\.asf:\d+: bone shank: unsupported dof 'tx'"),
     ])
-    def test_bad_amc(self, tmp_path, change, message):
+    def test_bad_file(self, tmp_path, file, change, message):
         from zoopraxis.core import amc
 
+        texts = {"asf": ASF, "amc": AMC}
+        texts[file] = texts[file].replace(*change)
         with pytest.raises(ZoopraxisError, match=message):
-            amc.read_amc(leg_files(tmp_path, amc=AMC.replace(*change)))
-
-    @pytest.mark.parametrize("change, message", [
-        (("length 2", "length two"), r"leg\.asf:\d+: length: 'two' are not finite"),
-        (("axis 10 0 0 XYZ", "axis 10 0 0 XYY"), r"leg\.asf:\d+: axis order 'XYY'"),
-        (("thigh shank\n", "thigh foot\n"), r"leg\.asf:\d+: hierarchy names unknown bone 'foot'"),
-        (("    dof rx\n", "    dof tx\n"), r"leg\.asf:\d+: bone shank: unsupported dof 'tx'"),
-    ])
-    def test_bad_asf(self, tmp_path, change, message):
-        from zoopraxis.core import amc
-
-        with pytest.raises(ZoopraxisError, match=message):
-            amc.read_amc(leg_files(tmp_path, asf=ASF.replace(*change)))
+            amc.read_amc(leg_files(tmp_path, **texts))
 
     def test_missing_skeleton(self, tmp_path):
         from zoopraxis.core import amc
