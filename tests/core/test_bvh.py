@@ -653,7 +653,8 @@ class TestAcclaim:
         ("asf", ("axis 10 0 0 XYZ", "axis 10 0 0 XYY"), r"leg\.asf:\d+: axis order 'XYY'"),
         ("asf", ("thigh shank\n", "thigh foot\n"),
          r"leg\.asf:\d+: hierarchy names unknown bone 'foot'"),
-        ("asf", ("    dof rx\n", "    dof tx\n"), r"leg\.asf:\d+: bone shank: unsupported dof 'tx'"),
+        ("asf", ("    dof rx\n", "    dof tx\n"),
+         r"leg\.asf:\d+: bone shank: unsupported dof 'tx'"),
     ])
     def test_bad_file(self, tmp_path, file, change, message):
         from zoopraxis.core import amc
