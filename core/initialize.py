@@ -1492,10 +1492,10 @@ def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None,
         Uncalibrated, when the lengths are fitted: the prior of the body's proportions, learned
         from many performers (``"default"``: the shipped one), or None (the default) for the
         template's proportions, each within DIMS_PRIOR_SIGMA. Not the default: on held-out CMU
-        performers in one view it was 53.5 mm instead of 58.3 for those with their own
-        lengths but 78 instead of 63 for those on cgspeed's Daz figure (64.4 against 60.2 in
-        all, 18 frames), and random bodies of the template's proportions came out 75 mm off
-        instead of under 40 (benchmarks/bench_initialize.py --only held-out-subjects).
+        performers in one view it was 72.6 mm off instead of 64.2 (36 frames; 60.1 instead of
+        57.2 for those with their own lengths, 88.2 instead of 72.9 for those on cgspeed's Daz
+        figure), and random bodies of the template's proportions came out 75 mm off instead
+        of under 40 (benchmarks/bench_initialize.py --only held-out-subjects).
 
     Returns
     -------
