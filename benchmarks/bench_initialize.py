@@ -594,13 +594,84 @@ def limits_cases(table, rng, n):
         table.add(case, metric, values, target)
 
 
+# Leave-subjects-out folds of the CMU performers (cmu_more and cmu_mocap): 60 and 61 dance the
+# same salsa takes as partners, so they are held out together.
+SUBJECT_FOLDS = (("01", "02", "94"), ("03", "05", "12"), ("06", "09", "13"),
+                 ("10", "14", "16"), ("35", "49", "135"), ("60", "61", "131"))
+MORE = CMU.parent / "cmu_more"
+# The takes the pose prior was learned from before cmu_more (two performers).
+FOUR_TAKES = ("131_01", "131_02", "131_03", "01_01")
+
+
+def held_out_subjects_cases(table, rng, n):
+    """One uncalibrated view (1080p from afar, 2 px clicks) of frames of performers the priors
+    have not seen: for each fold of SUBJECT_FOLDS the shipped pose prior and proportions prior
+    without that fold's performers, judged on n // 5 random frames of each of them (a random
+    take, a random frame). Rows: the pose prior of the four takes it had before cmu_more
+    (those of the fold left out) with the template's proportions; the prior of all other
+    performers with the template's proportions (what ships); that prior with the proportions
+    prior of the other performers (``initialize(..., proportions=...)``); and, beside them,
+    the performer's true lengths kept. Each row also apart for the performers captured with
+    their own lengths and for those on cgspeed's one Daz figure."""
+    from zoopraxis.core import bvh, fit3d
+    from zoopraxis.core.proportions import ProportionsPrior
+
+    if not MORE.is_dir():
+        print(f"  (no data at {MORE}: held-out subject cases skipped)", file=sys.stderr)
+        return
+    takes = {}
+    for path in bvh.capture_paths(MORE, CMU):
+        takes.setdefault(bvh.subject_of(path.stem), []).append(path)
+    rows = {}
+    per_subject = max(1, n // 5)
+    for fold in SUBJECT_FOLDS:
+        pose = init.PosePrior.load(exclude_subjects=fold)
+        keep = np.isin(pose.takes.astype(str), FOUR_TAKES)
+        four = init.PosePrior(pose.samples[keep], pose.dof_names, pose.template,
+                              pose.takes[keep]) if keep.any() else None
+        proportions = ProportionsPrior.load(exclude=fold)
+        variants = (("prior of the 4 takes before cmu_more, template proportions", four,
+                     None, False),
+                    ("prior of the other performers, template proportions", pose, None, False),
+                    ("prior and proportions of the other performers", pose, proportions, False),
+
+                    ("prior of the other performers, true lengths kept", pose, None, True))
+        for subject in fold:
+            for _ in range(per_subject):
+                path = takes[subject][rng.integers(len(takes[subject]))]
+                take = bvh.read_take(path)
+                joints = take.joints(30)
+                X = joints[rng.integers(len(joints))]
+                cams = ring(1, rng, FHD_100M, aim_at(X))
+                anchor = [Anchor(0, clicks(cams, X, rng))]
+                cameras = {c.name: c for c in cams}
+                for label, prior, props, true_lengths in variants:
+                    if prior is None:
+                        continue
+                    options = dict(dims=fit3d.dims_from_joints(joints[::30]),
+                                   fit_dims=False) if true_lengths else {}
+                    result = init.initialize(anchor, cameras, calibrated=False,
+                                             pose_prior=prior, proportions=props, **options)
+                    error = 1000 * init.procrustes_mpjpe(result.joints3d(0), X)
+                    rows.setdefault(label, []).append(error)
+                    kind = "Daz figure" if take.skeleton == "cmu_daz" else "own lengths"
+                    rows.setdefault(f"{label}; {kind}", []).append(error)
+        print(f"  fold {'/'.join(fold)} done", file=sys.stderr, flush=True)
+    case = "held-out CMU performers, 1 uncalibrated, 1080p @100m"
+    for label, values in rows.items():
+        target = "<= 40" if label == "prior of the other performers, template proportions" \
+            else ""
+        table.add(case, f"PA-MPJPE mm, {label}", values, target)
+
+
 # Row groups with their own random stream (an offset on the seed), run after the others or
 # alone with --only.
 OWN_STREAMS = {"known-lengths": (1, known_lengths_cases),
                "one-view-anchors": (2, one_view_anchors_cases),
                "near-view": (3, near_view_cases),
                "length-error": (4, length_error_cases),
-               "limits": (5, limits_cases)}
+               "limits": (5, limits_cases),
+               "held-out-subjects": (6, held_out_subjects_cases)}
 
 
 def main():

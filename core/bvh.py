@@ -5,6 +5,9 @@ animate, End Sites closing the chains) and a MOTION block (one line of channel v
 per frame). :func:`read_bvh` reads any such file into a :class:`Motion`;
 :func:`load_cmu` also converts a CMU capture into the Zoopraxis world (Z up, metres),
 and :func:`standard_joints` reduces it to the 17 standard joints of the design contract.
+:func:`read_take` reads a capture of any CMU convention (cgspeed's Motionbuilder and Daz
+namings, ASF bone names, ASF/AMC through ``amc``) with the frame rate and reference frame
+a ``MANIFEST.tsv`` beside it gives.
 
 Convention (BVH, as written by Biovision and read by Blender's importer):
 
@@ -20,6 +23,7 @@ Convention (BVH, as written by Biovision and read by Blender's importer):
 import math
 import re
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
@@ -447,9 +451,12 @@ class _HierarchyParser:
         for _ in range(count):
             token, line = self.next(what)
             try:
-                values.append(float(token))
+                value = float(token)
             except ValueError:
-                self.fail(f"{what}: '{token}' is not a number", line)
+                value = math.nan
+            if not math.isfinite(value):
+                self.fail(f"{what}: '{token}' is not a finite number", line)
+            values.append(value)
         return values
 
     def joint(self, parent):
@@ -487,7 +494,7 @@ class _HierarchyParser:
 
     def channel_list(self, name, line):
         token, count_line = self.next("a channel count")
-        if not token.isdigit():
+        if not (token.isascii() and token.isdigit()):
             self.fail(f"CHANNELS of joint '{name}': '{token}' is not a count", count_line)
         names = []
         for _ in range(int(token)):
@@ -512,7 +519,7 @@ def _parse_motion(lines, motion_line, source, num_channels):
             value = convert(match.group(1)) if match else None
         except ValueError:
             value = None
-        if value is None or not value >= smallest:
+        if value is None or not smallest <= value < math.inf:
             found = f"'{lines[n].strip()}'" if n < len(lines) else "end of file"
             raise ZoopraxisError(
                 f"{source}:{n + 1}: expected '{what}: <{what.lower()}>', found {found}")
@@ -544,6 +551,11 @@ def _parse_motion(lines, motion_line, source, num_channels):
                     raise ZoopraxisError(f"{source}:{numbered[n][0]}: frame {n} has "
                                          f"'{token}', not a number") from None
         raise
+    bad = ~np.isfinite(data)
+    if bad.any():
+        n, c = np.argwhere(bad)[0]
+        raise ZoopraxisError(f"{source}:{numbered[n][0]}: frame {n} has '{rows[n][c]}', "
+                             "not a finite number")
     return frame_time, data
 
 
@@ -557,27 +569,32 @@ class JointRule:
 
     The position is the mean of the origins of the joints ``at``, plus ``along`` times
     the vector from ``bone``'s origin to its End Site (the head's centre is half-way up
-    the head bone). Its frame turns with ``bone``.
+    the head bone), plus ``shift`` (metres, in ``bone``'s own frame, which for the
+    skeletons here is the world's at rest: Z up). Its frame turns with ``bone``.
     """
 
     at: tuple
     bone: str
     along: float = 0.0
+    shift: tuple = (0.0, 0.0, 0.0)
 
 
-def _side(prefix, names):
-    """Rules for one side; ``names`` lists hip, knee, ankle, toe, shoulder, elbow, wrist."""
+def _side(prefix, names, toe_along=0.0):
+    """Rules for one side; ``names`` lists hip, knee, ankle, toe, shoulder, elbow, wrist.
+    With ``toe_along`` the toe is that far along the toe bone towards its End Site."""
     hip, knee, ankle, toe, shoulder, elbow, wrist = names
     return {f"{prefix}_hip": JointRule((hip,), hip), f"{prefix}_knee": JointRule((knee,), knee),
-            f"{prefix}_ankle": JointRule((ankle,), ankle), f"{prefix}_toe": JointRule((toe,), toe),
+            f"{prefix}_ankle": JointRule((ankle,), ankle),
+            f"{prefix}_toe": JointRule((toe,), toe, along=toe_along),
             f"{prefix}_shoulder": JointRule((shoulder,), shoulder),
             f"{prefix}_elbow": JointRule((elbow,), elbow),
             f"{prefix}_wrist": JointRule((wrist,), wrist)}
 
 
 SKELETONS = {
-    # CMU, cgspeed's BVH conversion (01_01.bvh). Neck runs from the top of the thorax;
-    # Neck1 starts at shoulder height, the base of the visible neck.
+    # CMU, cgspeed's Motionbuilder-friendly BVH conversion (01_01.bvh, cmu_more/bvh_mb). Neck
+    # runs from the top of the thorax; Neck1 starts at shoulder height, the base of the
+    # visible neck.
     "cmu_cgspeed": {
         "pelvis": JointRule(("LeftUpLeg", "RightUpLeg"), "Hips"),
         "neck": JointRule(("Neck1",), "Neck1"),
@@ -599,26 +616,69 @@ SKELETONS = {
         **_side("r", ("RightHip", "RightKnee", "RightAnkle", "RightToe",
                       "RightShoulder", "RightElbow", "RightWrist")),
     },
+    # CMU's own ASF bone names (ASF/AMC read by ``amc``, and amc2bvh's output with the root
+    # called ``hip``): each BVH joint sits at the start of its bone, so lfemur is the hip
+    # joint, lhumerus the shoulder; upperneck starts at shoulder height.
+    "cmu_asf": {
+        "pelvis": JointRule(("lfemur", "rfemur"), "hip"),
+        "neck": JointRule(("upperneck",), "upperneck"),
+        "head": JointRule(("head",), "head", along=0.5),
+        **_side("l", ("lfemur", "ltibia", "lfoot", "ltoes", "lhumerus", "lradius", "lwrist")),
+        **_side("r", ("rfemur", "rtibia", "rfoot", "rtoes", "rhumerus", "rradius", "rwrist")),
+    },
+    # cgspeed's Daz-friendly conversion: every subject on one Daz figure (centimetres). The
+    # foot has no toe joint: its End Site is the ball of the foot. The head bone starts at
+    # the base of the skull and its children are the eyes, 8 cm up: the head's centre.
+    "cmu_daz": {
+        "pelvis": JointRule(("lThigh", "rThigh"), "hip"),
+        "neck": JointRule(("neck",), "neck"),
+        "head": JointRule(("head",), "head", shift=(0.0, 0.0, 0.08)),
+        **_side("l", ("lThigh", "lShin", "lFoot", "lFoot", "lShldr", "lForeArm", "lHand"),
+                toe_along=1.0),
+        **_side("r", ("rThigh", "rShin", "rFoot", "rFoot", "rShldr", "rForeArm", "rHand"),
+                toe_along=1.0),
+    },
 }
 """Skeleton name -> {standard joint -> JointRule}; add an entry to support a new skeleton."""
 
-SKELETON_FAMILIES = {"cmu": ("cmu_cgspeed", "cmu_jointnames")}
+SKELETON_SCALE = {"cmu_cgspeed": CMU_SCALE, "cmu_jointnames": CMU_SCALE, "cmu_asf": CMU_SCALE,
+                  "cmu_daz": 0.01}
+"""Metres per file unit of each skeleton's files (Daz figures are in centimetres)."""
+
+SKELETON_FAMILIES = {"cmu": ("cmu_cgspeed", "cmu_jointnames", "cmu_asf", "cmu_daz")}
 """Names that stand for whichever member skeleton's joints a motion has."""
 
 
-def _rules(motion, skeleton):
+def skeleton_of(motion, skeleton="cmu"):
+    """The member of :data:`SKELETON_FAMILIES` (or the skeleton itself) whose rules map
+    ``motion``'s joints.
+
+    Raises
+    ------
+    ZoopraxisError
+        No member maps it: the message names the file and a joint that the closest
+        skeleton (the one missing fewest) needs and the motion lacks.
+    """
     candidates = SKELETON_FAMILIES.get(skeleton, (skeleton,))
+    closest = None
     for name in candidates:
         if name not in SKELETONS:
             raise ZoopraxisError(f"unknown skeleton '{skeleton}' "
                                  f"(expected one of {', '.join([*SKELETONS, *SKELETON_FAMILIES])})")
-        rules = SKELETONS[name]
-        needed = {j for rule in rules.values() for j in (*rule.at, rule.bone)}
+        needed = {j for rule in SKELETONS[name].values() for j in (*rule.at, rule.bone)}
         missing = sorted(needed - set(motion.names))
         if not missing:
-            return rules
-    raise ZoopraxisError(f"{motion.source}: not a '{skeleton}' skeleton "
-                         f"(no joint '{missing[0]}')")
+            return name
+        if closest is None or len(missing) < len(closest[1]):
+            closest = (name, missing)
+    name, missing = closest
+    also = f" and {len(missing) - 1} more" if len(missing) > 1 else ""
+    raise ZoopraxisError(f"{motion.source}: not a '{skeleton}' skeleton (no joint "
+                         f"'{missing[0]}'{also}; closest: {name})")
+
+
+def _rules(motion, skeleton):
+    return SKELETONS[skeleton_of(motion, skeleton)]
 
 
 def _standard(motion, skeleton, frames):
@@ -637,6 +697,8 @@ def _standard(motion, skeleton, frames):
         if rule.along:
             tip = motion.end_site_position(bone, transforms=transforms)
             point = point + rule.along * (tip - positions[:, bone])
+        if any(rule.shift):
+            point = point + transforms[:, bone, :3, :3] @ np.asarray(rule.shift, float)
         result[:, k, :3, :3] = transforms[:, bone, :3, :3]
         result[:, k, :3, 3] = point
     return result
@@ -687,3 +749,180 @@ def load_cmu(path, fps=None):
     """
     motion = read_bvh(path).to_world(CMU_SCALE, up="y")
     return motion.resampled(fps) if fps is not None else motion
+
+
+# ---------------------------------------------------------------------------------------
+# Takes of any CMU convention, with the corrections of a MANIFEST.tsv
+
+
+MANIFEST_NAME = "MANIFEST.tsv"
+
+
+@dataclass(frozen=True)
+class TakeInfo:
+    """What a manifest says about one take: its true frame rate and whether the file starts
+    with an inserted reference pose."""
+
+    fps: float
+    tpose: bool
+
+
+_CAPTURE_FPS = re.compile(r"CMU capture\s+(\d+(?:\.\d+)?)\s*fps|^\s*(\d+(?:\.\d+)?)\s*fps")
+
+
+def read_manifest(path):
+    """Frame rates and reference frames of the takes of a folder's ``MANIFEST.tsv``.
+
+    The file is tab-separated with a header line; the columns used are ``file`` (a path
+    relative to the folder), ``frame_rate`` (the capture rate follows ``CMU capture``, or
+    leads: ``120 fps (...)``) and ``frame_count`` (``incl. T-pose frame 0`` marks an inserted
+    reference pose).
+
+    Returns
+    -------
+    takes : dict of str to TakeInfo
+        Keyed by file stem (``"60_05"``).
+
+    Raises
+    ------
+    ZoopraxisError
+        Unreadable, or a row without a frame rate (naming the line).
+    """
+    path = Path(path)
+    try:
+        lines = path.read_text(encoding="utf-8", errors="replace").splitlines()
+    except OSError as e:
+        raise ZoopraxisError(f"{path}: cannot read manifest ({e.strerror})") from None
+    if not lines:
+        raise ZoopraxisError(f"{path}: empty manifest")
+    head = lines[0].split("\t")
+    try:
+        columns = [head.index(k) for k in ("file", "frame_rate", "frame_count")]
+    except ValueError:
+        raise ZoopraxisError(f"{path}:1: manifest header needs the columns file, "
+                             "frame_rate and frame_count") from None
+    takes = {}
+    for n, line in enumerate(lines[1:], 2):
+        cells = line.split("\t")
+        if not line.strip():
+            continue
+        if len(cells) <= max(columns):
+            raise ZoopraxisError(f"{path}:{n}: {len(cells)} columns, expected {len(head)}")
+        name, rate, count = (cells[k] for k in columns)
+        match = _CAPTURE_FPS.search(rate)
+        if match is None:
+            raise ZoopraxisError(f"{path}:{n}: no frame rate in '{rate}'")
+        fps = float(match.group(1) or match.group(2))
+        takes[Path(name).stem] = TakeInfo(fps, "T-pose frame 0" in count)
+    return takes
+
+
+def _manifest_for(path):
+    for folder in (path.parent, path.parent.parent):
+        candidate = folder / MANIFEST_NAME
+        if candidate.is_file():
+            return read_manifest(candidate)
+    return {}
+
+
+@dataclass(eq=False)
+class Take:
+    """A motion-capture take in the Zoopraxis world, whatever convention its file uses.
+
+    Attributes
+    ----------
+    name : str
+        The file's stem, CMU's ``SUBJECT_TRIAL`` (``"02_01"``).
+    subject : str
+        The performer: the part of the name before ``_``.
+    motion : Motion
+        World space (Z up, metres) at the take's true frame rate, reference frame dropped.
+    skeleton : str
+        The key of :data:`SKELETONS` that maps its joints.
+    """
+
+    name: str
+    subject: str
+    motion: Motion
+    skeleton: str
+
+    @property
+    def fps(self):
+        return self.motion.fps
+
+    def joints(self, fps=None):
+        """The 17 standard joints, world metres, shape (F, 17, 3), resampled to ``fps``."""
+        motion = self.motion.resampled(fps) if fps is not None else self.motion
+        return standard_joints(motion, self.skeleton)
+
+
+def _is_reference_frame(motion):
+    """A file whose first frame's root rotation is exactly zero and whose second frame's is
+    not starts with an inserted reference pose (no capture holds the root that still)."""
+    if motion.num_frames < 2:
+        return False
+    columns = [c for c, n in zip(motion._columns[0], motion.channels[0])
+               if n in _ROTATION_CHANNELS]
+    return bool(columns) and not motion.data[0, columns].any() and \
+        bool(motion.data[1, columns].any())
+
+
+def read_take(path, manifest=None):
+    """Read a capture of any supported convention (BVH of every :data:`SKELETONS` naming,
+    or AMC with its ASF) into world space with its standard-joint rules.
+
+    The frame rate and the reference frame come from ``manifest`` (a :func:`read_manifest`
+    result; by default the ``MANIFEST.tsv`` in the file's folder or the one above, if any)
+    when it lists the take: a header that states the wrong rate is overruled and an inserted
+    T-pose frame 0 dropped. A take it does not list keeps its header's rate (AMC: 120 fps)
+    and loses frame 0 only if that frame is a reference pose (root rotation exactly zero).
+
+    Returns
+    -------
+    take : Take
+
+    Raises
+    ------
+    ZoopraxisError
+        Unreadable or malformed, or a skeleton no rule maps (naming a joint it lacks).
+    """
+    path = Path(path)
+    info = (_manifest_for(path) if manifest is None else manifest).get(path.stem)
+    if path.suffix.lower() == ".amc":
+        from .amc import AMC_FPS, read_amc
+
+        motion = read_amc(path, fps=info.fps if info else AMC_FPS)
+    else:
+        motion = read_bvh(path)
+        if info is not None:
+            motion = replace(motion, frame_time=1.0 / info.fps)
+    drop = info.tpose if info is not None else _is_reference_frame(motion)
+    if drop:
+        motion = replace(motion, data=motion.data[1:])
+    skeleton = skeleton_of(motion)
+    motion = motion.to_world(SKELETON_SCALE[skeleton], up="y")
+    return Take(path.stem, subject_of(path.stem), motion, skeleton)
+
+
+def capture_paths(*folders, hold_out=()):
+    """The captures (``.bvh``, ``.amc``) under the folders, sorted, without those of the
+    subjects ``hold_out`` (CMU's ``SUBJECT`` of ``SUBJECT_TRIAL``, as strings: ``"02"``).
+
+    Raises
+    ------
+    ZoopraxisError
+        A folder that does not exist.
+    """
+    paths = []
+    for folder in map(Path, folders):
+        if not folder.is_dir():
+            raise ZoopraxisError(f"{folder}: no such folder")
+        paths += [p for p in folder.rglob("*") if p.suffix.lower() in (".bvh", ".amc")]
+    held = {str(s) for s in hold_out}
+    return sorted((p for p in paths if subject_of(p.stem) not in held), key=str)
+
+
+def subject_of(take):
+    """The CMU subject of a take's name: ``"02"`` of ``"02_01"`` (the name itself if it has
+    no ``_``)."""
+    return str(take).split("_")[0]

@@ -2,8 +2,9 @@
 of motion at hand.
 
 One uncalibrated view cannot see whether a limb points towards the camera or away from it;
-the pose prior decides (``initialize``). The shipped prior knows a few CMU takes (walks, hops,
-playground jumps). A prior learned from captures of the motion being tracked (CMU BVH files)
+the pose prior decides (``initialize``). The shipped prior knows 80 CMU takes of 18 performers
+(``tools/learn_pose_prior.py``). A prior learned from captures of the motion being tracked
+(CMU BVH or AMC files)
 or from earlier tracks of it (result.json, say of a calibrated shoot of the same performer)
 knows that motion better; ``init`` and ``track`` take it with ``--pose-prior``.
 """
@@ -23,8 +24,9 @@ def build_parser():
                     "and track) from the poses of motion capture (CMU BVH) or of tracked takes "
                     "(result.json; lost frames left out), with their mirror images.")
     p.add_argument("takes", nargs="+", metavar="TAKE",
-                   help="a BVH capture with a CMU skeleton, a Zoopraxis result.json or a "
-                        "truth.json of 'zoopraxis synth'")
+                   help="a capture with a CMU skeleton (BVH of any CMU naming, or AMC with its "
+                        "ASF beside it), a Zoopraxis result.json or a truth.json of "
+                        "'zoopraxis synth'")
     p.add_argument("--step", type=int, default=4,
                    help="use every STEP-th frame (BVH at 30 fps; default 4)")
     p.add_argument("--template", default="full", help="body template (default full)")
@@ -47,10 +49,10 @@ def read_take_joints(path):
     if not path.is_file():
         raise ZoopraxisError(f"{path}: no such file")
     suffix = path.suffix.lower()
-    if suffix == ".bvh":
-        from .bvh import load_cmu, standard_joints
+    if suffix in (".bvh", ".amc"):
+        from .bvh import read_take
 
-        return standard_joints(load_cmu(path, fps=30.0))
+        return read_take(path).joints(fps=30.0)
     if suffix == ".json":
         from .inputs import read_json
         from .joints import STANDARD_JOINTS
@@ -69,8 +71,8 @@ def read_take_joints(path):
         X = np.array(result.joints3d, float)
         X[np.array([s == "lost" for s in result.status], bool)] = np.nan
         return X
-    raise ZoopraxisError(f"{path}: not a take (expected a .bvh capture, a result.json or a "
-                         "truth.json)")
+    raise ZoopraxisError(f"{path}: not a take (expected a .bvh or .amc capture, a result.json "
+                         "or a truth.json)")
 
 
 def main(argv):
@@ -88,7 +90,8 @@ def main(argv):
     paths = [Path(t) for t in args.takes]
     names = {}
     for path in paths:
-        name = path.stem if path.suffix.lower() == ".bvh" else path.parent.name + "/" + path.stem
+        capture = path.suffix.lower() in (".bvh", ".amc")
+        name = path.stem if capture else path.parent.name + "/" + path.stem
         if name in names.values():
             name = str(path)
         names[path] = name

@@ -33,6 +33,10 @@ def build_parser():
                    help="longest side of the working images, pixels (default 960)")
     p.add_argument("--particles", type=int, default=2000,
                    help="particles of the particle and hybrid trackers (default 2000)")
+    p.add_argument("--motion-prior", choices=("smooth", "walk"), default="smooth",
+                   help="how the particle and hybrid trackers predict the next frame: smooth "
+                        "motion of every joint (default), or the walking prior learned from "
+                        "the walks of many performers (core/data/walk_prior.npz)")
     p.add_argument("--seed", type=int, default=2345)
     p.add_argument("--workers", type=int, default=0,
                    help="processes for the differential tracker's passes (a take with several "
@@ -86,6 +90,9 @@ def main(argv):
         print(f"track: warning: {warning}", flush=True)
     if args.workers < 0:
         raise ZoopraxisError(f"--workers {args.workers}: give 0 (one per core) or more")
+    if args.motion_prior != "smooth" and args.tracker == "differential":
+        raise ZoopraxisError(f"--motion-prior {args.motion_prior} works with --tracker particle "
+                             "or hybrid only")
     if args.refine_body and args.tracker != "differential":
         raise ZoopraxisError("--refine-body works with --tracker differential only")
     if args.refine_body and cameras is None:
@@ -119,7 +126,8 @@ def main(argv):
                 raise ZoopraxisError(f"--tracker {args.tracker} is not available in this "
                                      "version; use --tracker differential") from None
             result = hybrid.track(opened, anchors, cameras, tracker=args.tracker,
-                                  particles=args.particles, seed=args.seed, **kwargs)
+                                  particles=args.particles, seed=args.seed,
+                                  prior=args.motion_prior, **kwargs)
     _write_or_rescue(out, result, args.force)
     elapsed = time.perf_counter() - t0
     counts = {s: result.status.count(s) for s in ("ok", "uncertain", "lost")}

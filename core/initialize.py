@@ -288,13 +288,16 @@ class PosePrior:
         self._mixture = None
 
     @classmethod
-    def load(cls, path=None, exclude=()):
+    def load(cls, path=None, exclude=(), exclude_subjects=()):
         """Read a prior file (``core/data/pose_prior.npz`` by default).
 
         Parameters
         ----------
         exclude : sequence of str
             Takes to leave out (to evaluate on them).
+        exclude_subjects : sequence of str
+            Performers to leave out: every take named ``SUBJECT_TRIAL`` of theirs (CMU's
+            naming, ``bvh.subject_of``).
 
         Raises
         ------
@@ -311,10 +314,14 @@ class PosePrior:
         if not (np.issubdtype(angles.dtype, np.number) and np.all(np.isfinite(angles))):
             raise ZoopraxisError(f"{path}: not a pose prior file (angles are not finite "
                                  "numbers)")
-        keep = ~np.isin(takes, list(exclude))
+        from .bvh import subject_of
+
+        subjects = np.array([subject_of(t) for t in takes])
+        keep = ~np.isin(takes, list(exclude)) & ~np.isin(subjects, [str(s) for s in
+                                                                     exclude_subjects])
         if not keep.any():
             raise ZoopraxisError(f"{path}: no poses left after leaving out "
-                                 f"{', '.join(exclude)}")
+                                 f"{', '.join([*exclude, *map(str, exclude_subjects)])}")
         if angles.ndim != 2 or angles.shape != (len(takes), len(names)):
             raise ZoopraxisError(f"{path}: not a pose prior file (angles of shape "
                                  f"{angles.shape} for {len(takes)} poses of {len(names)} DOFs)")
@@ -682,8 +689,13 @@ class _Problem:
     def __init__(self, kin, obs, weights, state, *, free_root, free_angles=True, free_cams=None,
                  fit_dims=True, calibrated=True, loss_scale=LOSS_SCALE_PX, dims_range=DIMS_RANGE,
                  pose_prior=None, prior_frames=None, tilt=None, tilt_frames=None,
-                 perspective=False):
+                 perspective=False, dims_prior=None):
         self.kin = kin
+        # (mean (D,), relative sigma (D,)) of the lengths about ``size * mean``: the template's
+        # proportions and DIMS_PRIOR_SIGMA unless a learned proportions prior is given.
+        self.dims_mean, self.dims_sigma = (kin.default_dims, DIMS_PRIOR_SIGMA) \
+            if dims_prior is None else (np.asarray(dims_prior[0], float),
+                                        np.asarray(dims_prior[1], float))
         self.obs = np.asarray(obs, dtype=float)                     # (F, V, 17, 2)
         F, V = self.obs.shape[:2]
         w = np.where(np.isfinite(self.obs).all(axis=-1), np.asarray(weights, float), 0.0)
@@ -911,8 +923,8 @@ class _Problem:
         res = [r_obs]
         row = 2 * M
         if self.fit_dims:
-            d0 = self.kin.default_dims
-            wd = CLICK_SIGMA_PX / np.maximum(DIMS_PRIOR_SIGMA, DIMS_PRIOR_FLOOR_M / d0)
+            d0 = self.dims_mean
+            wd = CLICK_SIGMA_PX / np.maximum(self.dims_sigma, DIMS_PRIOR_FLOOR_M / d0)
             res.append(wd * (dims / d0 - size))
             r = row + np.arange(self.D)
             block(r, np.arange(self.D), wd / d0)
@@ -1468,7 +1480,7 @@ def _seen_twice(anchor, views):
 
 def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None, fit_dims=True,
                views=None, pose_prior="default", flips=None, camera_tilt=CAMERA_TILT_DEG,
-               perspective=False):
+               perspective=False, proportions=None):
     """Pose, angles and body dimensions from the clicked joints of anchor frames (§2.6).
 
     Parameters
@@ -1511,6 +1523,14 @@ def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None,
         Uncalibrated: the views are near the body (a phone or a normal lens a few metres away,
         at least 1 / KAPPA_MAX), so each camera's perspective is fitted too
         (``ScaledOrthoCamera.kappa``). Default: far or telephoto views, scaled orthographic.
+    proportions : proportions.ProportionsPrior, "default" or None
+        Uncalibrated, when the lengths are fitted: the prior of the body's proportions, learned
+        from many performers (``"default"``: the shipped one), or None (the default) for the
+        template's proportions, each within DIMS_PRIOR_SIGMA. Not the default: on held-out CMU
+        performers in one view it was 72.6 mm off instead of 64.2 (36 frames; 60.1 instead of
+        57.2 for those with their own lengths, 88.2 instead of 72.9 for those on cgspeed's Daz
+        figure), and random bodies of the template's proportions came out 75 mm off instead
+        of under 40 (benchmarks/bench_initialize.py --only held-out-subjects).
 
     Returns
     -------
@@ -1571,6 +1591,15 @@ def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None,
             # A camera looking down sees the body's up axis turned away from it.
             fit.tilt = (-np.sin(np.radians(down)), np.sin(np.radians(spread)))
         fit.perspective = bool(perspective)
+        if isinstance(proportions, str) and proportions == "default":
+            from .proportions import default_proportions_prior
+
+            proportions = default_proportions_prior()
+        if proportions is not None:
+            fit.dims_prior = proportions.mean_sigma()
+            if not dims:
+                # start from the proportions' mean (at the template's size)
+                fit.dims0 = fit.dims_prior[0].copy()
     pose_prior = resolve_pose_prior(pose_prior, template)
     fit.prior = None if pose_prior is None else \
         pose_prior.with_broad(kin.prior_mean, kin.prior_sigma)
@@ -2387,6 +2416,8 @@ class _UncalibratedFit(_Fit):
 
     calibrated = False
 
+    dims_prior = None       # (mean, sigma) of the lengths (proportions.ProportionsPrior)
+
     def __init__(self, kin, obs, weights, sizes, views, anchors, dims0, fit_dims, warnings):
         super().__init__(kin, obs, weights, views, anchors, dims0, fit_dims, warnings)
         self.sizes = sizes
@@ -2401,7 +2432,7 @@ class _UncalibratedFit(_Fit):
     def options(self, state, f, fit_dims):
         free = np.array([[c is not None for c in row] for row in state.cameras])
         options = dict(free_root=False, free_cams=free, fit_dims=fit_dims, calibrated=False,
-                       perspective=self.perspective)
+                       perspective=self.perspective, dims_prior=self.dims_prior)
         if self.prior is not None and PRIOR_WEIGHT > 0 and self._prior_in_fit:
             # Frames seen in one view: the learned prior decides what the clicks leave free.
             options.update(pose_prior=self.prior, prior_frames=free.sum(axis=1) == 1)

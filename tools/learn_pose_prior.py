@@ -1,17 +1,20 @@
 """Learn the pose prior of single-view initialization from CMU motion capture.
 
-    .venv/bin/python tools/learn_pose_prior.py [--data ../shared/data/cmu_mocap] \
-        [--takes 131_01 131_02 131_03 01_01] [--step 4] [--out core/data/pose_prior.npz] [--force]
+    .venv/bin/python tools/learn_pose_prior.py [--data DIR ...] [--hold-out 02 35] \
+        [--step 8] [--out core/data/pose_prior.npz] [--force]
 
 This is how ``core/data/pose_prior.npz`` is built; run it again to rebuild it. Steps:
 
-1. read each capture at 30 fps and take its 17 standard joints (``core.bvh``);
+1. read every capture under the data folders (by default ``../shared/data/cmu_more``, 76
+   takes of 17 performers in every CMU convention, and ``../shared/data/cmu_mocap``) at 30 fps
+   and take its 17 standard joints (``core.bvh.read_take``: the manifest's frame rates, the
+   T-pose frames dropped), leaving out the performers of ``--hold-out``;
 2. fit the ``full`` body to every ``step``-th frame (``initialize.take_angles``: the lengths
    measured on the joints, then each frame's root and angles), as ``zoopraxis prior`` does
-   (this script runs it on the shipped takes);
+   (this script runs it on the takes);
 3. keep the joint angles of every frame and their mirror image (left and right swapped), each
-   labelled with its take, so that a benchmark can leave a take out
-   (``initialize.PosePrior.load(..., exclude=...)``).
+   labelled with its take (CMU's ``SUBJECT_TRIAL``), so that a benchmark can leave takes or
+   performers out (``initialize.PosePrior.load(..., exclude=..., exclude_subjects=...)``).
 
 The prior is a kernel density over these angle vectors, per body part
 (``initialize.PosePrior``); initialization uses it to choose the depth sign of limbs that one
@@ -24,23 +27,32 @@ import sys
 from pathlib import Path
 
 from zoopraxis import cli
+from zoopraxis.core import bvh
+from zoopraxis.core.errors import ZoopraxisError
 from zoopraxis.core.initialize import DEFAULT_POSE_PRIOR
 
 REPO = Path(__file__).resolve().parents[1]
+DATA = [REPO.parent / "shared" / "data" / "cmu_more", REPO.parent / "shared" / "data" / "cmu_mocap"]
 
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data" / "cmu_mocap")
-    parser.add_argument("--takes", nargs="+", default=["131_01", "131_02", "131_03", "01_01"])
-    parser.add_argument("--step", type=int, default=4, help="use every STEP-th frame at 30 fps")
+    parser.add_argument("--data", type=Path, nargs="+", default=DATA)
+    parser.add_argument("--hold-out", nargs="*", default=[], metavar="SUBJECT",
+                        help="CMU subjects to leave out (02, 35, ...)")
+    parser.add_argument("--step", type=int, default=8, help="use every STEP-th frame at 30 fps")
     parser.add_argument("--out", type=Path, default=DEFAULT_POSE_PRIOR)
     parser.add_argument("--force", action="store_true", help="replace an existing output")
     args = parser.parse_args(argv)
+    try:
+        paths = bvh.capture_paths(*args.data, hold_out=args.hold_out)
+    except ZoopraxisError as error:
+        print(f"learn_pose_prior: error: {error}", file=sys.stderr)
+        return 2
     args.out.parent.mkdir(parents=True, exist_ok=True)
     # the same work as ``zoopraxis prior`` (core/cli_prior.py), which names takes by file stem
-    command = ["prior", *(str(args.data / f"{name}.bvh") for name in args.takes),
-               "--step", str(args.step), "--out", str(args.out)] + ["--force"] * args.force
+    command = ["prior", *map(str, paths), "--step", str(args.step), "--out", str(args.out)] \
+        + ["--force"] * args.force
     return cli.main(command)
 
 

@@ -531,3 +531,304 @@ class TestCmuFrames:
             local = np.einsum("fba,fb->fa", world_from_bone[:, :3, :3],
                               walk_joints[:, J(end)] - world_from_bone[:, :3, 3])
             assert np.abs(local - local[0]).max() < 1e-9
+
+
+# ---------------------------------------------------------------------------------------
+# Takes of every CMU convention (cmu_more), ASF/AMC, manifests, malformed input
+
+
+# A two-bone leg with a tilted local frame (axis) on the thigh and one dof on the shank.
+ASF = """\
+:version 1.10
+:units
+  mass 1.0
+  length 0.45
+  angle deg
+:root
+   order TX TY TZ RX RY RZ
+   axis XYZ
+   position 0 0 0
+   orientation 0 0 0
+:bonedata
+  begin
+     id 1
+     name thigh
+     direction 0 -1 0
+     length 2
+     axis 0 0 30 XYZ
+    dof rx ry rz
+    limits (-160.0 20.0)
+           (-70.0 70.0)
+           (-60.0 70.0)
+  end
+  begin
+     id 2
+     name shank
+     direction 0.6 -0.8 0
+     length 1
+     axis 10 0 0 XYZ
+    dof rx
+  end
+:hierarchy
+  begin
+    root thigh
+    thigh shank
+  end
+"""
+
+AMC = """\
+#!OML:ASF leg.asf
+:FULLY-SPECIFIED
+:DEGREES
+1
+root 1 2 3 10 20 30
+thigh 40 -15 25
+shank 35
+2
+root 0 0 0 0 0 0
+thigh 0 0 0
+shank 0
+"""
+
+
+def acclaim_reference(root, thigh, shank):
+    """The leg's knee and foot by the Acclaim rules written out directly: a bone's end is
+    where it starts plus its length along ``world_from_bone C M C^-1 direction``."""
+    def fixed(angles, order="xyz"):
+        return Rotation.from_euler(order, angles, degrees=True).as_matrix()
+
+    world_from_root = fixed(root[3:])
+    C1, C2 = fixed([0, 0, 30]), fixed([10, 0, 0])
+    world_from_thigh = world_from_root @ C1 @ fixed(thigh) @ C1.T
+    world_from_shank = world_from_thigh @ C2 @ fixed([shank], "x") @ C2.T
+    hip = np.array(root[:3], float)
+    knee = hip + 2 * world_from_thigh @ [0, -1, 0]
+    foot = knee + 1 * world_from_shank @ [0.6, -0.8, 0]
+    return hip, knee, foot
+
+
+def leg_files(tmp_path, asf=ASF, amc=AMC):
+    (tmp_path / "leg.asf").write_text(asf)
+    (tmp_path / "leg_01.amc").write_text(amc)
+    return tmp_path / "leg_01.amc"
+
+
+class TestAcclaim:
+    def test_forward_kinematics_match_the_acclaim_rules(self, tmp_path):
+        from zoopraxis.core import amc
+
+        motion = amc.read_amc(leg_files(tmp_path))
+        assert motion.names == ["hip", "thigh", "shank"]
+        assert motion.fps == 120.0 and motion.num_frames == 2
+        positions = motion.positions()
+        for frame, values in enumerate((([1, 2, 3, 10, 20, 30], [40, -15, 25], 35),
+                                        ([0] * 6, [0, 0, 0], 0))):
+            hip, knee, foot = acclaim_reference(*values)
+            np.testing.assert_allclose(positions[frame, 1], hip, atol=1e-9)
+            np.testing.assert_allclose(positions[frame, 2], knee, atol=1e-9)
+            np.testing.assert_allclose(motion.end_site_position("shank", frame)[0], foot,
+                                       atol=1e-9)
+
+    def test_radians(self, tmp_path):
+        from zoopraxis.core import amc
+
+        degrees = amc.read_amc(leg_files(tmp_path)).positions()
+        radian_amc = AMC.replace("thigh 40 -15 25", "thigh " + " ".join(
+            repr(float(np.radians(v))) for v in (40, -15, 25))).replace(
+            "shank 35", f"shank {np.radians(35)!r}").replace(
+            "root 1 2 3 10 20 30", "root 1 2 3 " + " ".join(
+                repr(float(np.radians(v))) for v in (10, 20, 30)))
+        radian_asf = ASF.replace("angle deg", "angle rad").replace(
+            "axis 0 0 30 XYZ", f"axis 0 0 {np.radians(30)!r} XYZ").replace(
+            "axis 10 0 0 XYZ", f"axis {np.radians(10)!r} 0 0 XYZ")
+        radians = amc.read_amc(leg_files(tmp_path, radian_asf, radian_amc)).positions()
+        np.testing.assert_allclose(radians, degrees, atol=1e-9)
+
+    @pytest.mark.parametrize("file, change, message", [
+        ("amc", ("shank 35", "shank 35 1"), r"leg_01\.amc:7: bone shank has 2 values"),
+        ("amc", ("thigh 40", "knee 40"), r"leg_01\.amc:6: no bone named 'knee'"),
+        ("amc", ("shank 35", "shank nan"), r"leg_01\.amc:7: bone shank: 'nan' are not finite"),
+        ("amc", ("1\nroot 1", "root 1"), r"leg_01\.amc:\d+: 'root' before the first frame"),
+        ("asf", ("length 2", "length two"), r"leg\.asf:\d+: length: 'two' are not finite"),
+        ("asf", ("axis 10 0 0 XYZ", "axis 10 0 0 XYY"), r"leg\.asf:\d+: axis order 'XYY'"),
+        ("asf", ("thigh shank\n", "thigh foot\n"),
+         r"leg\.asf:\d+: hierarchy names unknown bone 'foot'"),
+        ("asf", ("    dof rx\n", "    dof tx\n"),
+         r"leg\.asf:\d+: bone shank: unsupported dof 'tx'"),
+    ])
+    def test_bad_file(self, tmp_path, file, change, message):
+        from zoopraxis.core import amc
+
+        texts = {"asf": ASF, "amc": AMC}
+        texts[file] = texts[file].replace(*change)
+        with pytest.raises(ZoopraxisError, match=message):
+            amc.read_amc(leg_files(tmp_path, **texts))
+
+    def test_missing_skeleton(self, tmp_path):
+        from zoopraxis.core import amc
+
+        (tmp_path / "leg_01.amc").write_text(AMC)
+        with pytest.raises(ZoopraxisError, match=r"leg_01\.amc: no skeleton file leg\.asf"):
+            amc.read_amc(tmp_path / "leg_01.amc")
+
+
+MANIFEST_HEAD = "file\tcmu_subject_trial\tframe_rate\tframe_count\n"
+
+
+class TestManifest:
+    def test_rates_and_reference_frames(self, tmp_path):
+        path = tmp_path / "MANIFEST.tsv"
+        path.write_text(MANIFEST_HEAD
+                        + "bvh_daz/60_05.bvh\t60_05\theader 120.00 fps; CMU capture 60 fps "
+                          "(HEADER WRONG: use 60 fps)\t1679 (incl. T-pose frame 0)\n"
+                        + "asf_amc/35_01.amc\t35_01\t120 fps (CMU capture rate)\t358\n")
+        takes = bvh.read_manifest(path)
+        assert takes == {"60_05": bvh.TakeInfo(60.0, True), "35_01": bvh.TakeInfo(120.0, False)}
+
+    def test_row_without_rate(self, tmp_path):
+        path = tmp_path / "MANIFEST.tsv"
+        path.write_text(MANIFEST_HEAD + "a/01_01.bvh\t01_01\tfast\t10\n")
+        with pytest.raises(ZoopraxisError, match=r"MANIFEST\.tsv:2: no frame rate in 'fast'"):
+            bvh.read_manifest(path)
+
+    def test_manifest_overrules_header_and_drops_frame_0(self, tmp_path):
+        folder = tmp_path / "bvh"
+        folder.mkdir()
+        text = CHAIN.replace("Frames: 2", "Frames: 3").replace(
+            "1 2 3 90", "0 0 0 0 0 0 0 0 0 0 0 0\n1 2 3 90")
+        (folder / "07_01.bvh").write_text(text)
+        (tmp_path / "MANIFEST.tsv").write_text(
+            MANIFEST_HEAD + "bvh/07_01.bvh\t07_01\theader 120 fps; CMU capture 60 fps\t"
+                            "3 (incl. T-pose frame 0)\n")
+        with pytest.raises(ZoopraxisError, match=r"07_01\.bvh: not a 'cmu' skeleton \(no joint"):
+            bvh.read_take(folder / "07_01.bvh")
+        renamed = text.replace("Hips", "hip").replace("Knee", "lfemur").replace("Ankle", "ltibia")
+        (folder / "07_01.bvh").write_text(renamed)
+        with pytest.raises(ZoopraxisError, match=r"no joint 'head' and \d+ more; closest: cmu_asf"):
+            bvh.read_take(folder / "07_01.bvh")
+
+
+# Three takes of each convention of the shared data (cmu_more/SOURCE.md).
+TAKES = [("bvh_mb/02_01.bvh", "cmu_cgspeed", 120.0, 343),
+         ("bvh_mb/09_01.bvh", "cmu_cgspeed", 120.0, 148),
+         ("bvh_daz/12_01.bvh", "cmu_daz", 120.0, 523),
+         ("bvh_daz/60_10.bvh", "cmu_daz", 60.0, 1197),       # header says 120
+         ("bvh_asfnames/16_01.bvh", "cmu_asf", 120.0, 322),   # header says 30; no T-pose
+         ("asf_amc/35_01.amc", "cmu_asf", 120.0, 358)]
+
+
+@functools.lru_cache(maxsize=None)
+def _take(path):
+    take = bvh.read_take(path)
+    return take, take.joints(30)
+
+
+class TestCmuMore:
+    @pytest.mark.parametrize("name, skeleton, fps, frames", TAKES)
+    def test_read(self, shared_data, name, skeleton, fps, frames):
+        take, joints = _take(str(shared_data / "cmu_more" / name))
+        assert (take.skeleton, take.fps, take.motion.num_frames) == (skeleton, fps, frames)
+        assert take.subject == name.split("/")[1].split("_")[0]
+        assert joints.shape == (len(range(0, frames, int(fps // 30))), 17, 3)
+
+    @pytest.mark.parametrize("name", [t[0] for t in TAKES])
+    def test_standing_body(self, shared_data, name):
+        """A human in metres, Z up, left on the left, feet on the floor: wrong units, a
+        T-pose left in, or mirrored axes all break one of these."""
+        take, joints = _take(str(shared_data / "cmu_more" / name))
+        toes = joints[:, [J("l_toe"), J("r_toe")], 2]
+        stature = joints[:, J("head"), 2] - toes.min(axis=1)
+        assert 1.2 < np.median(stature) < 1.8
+        assert -0.02 < toes.min() < 0.08
+        thigh = np.linalg.norm(joints[:, J("l_knee")] - joints[:, J("l_hip")], axis=-1)
+        assert 0.33 < thigh.mean() < 0.5 and thigh.std() < 1e-3
+        facing = facing_from_hips(joints)
+        feet = (joints[:, [J("l_toe"), J("r_toe")]] - joints[:, [J("l_ankle"), J("r_ankle")]]
+                ).sum(axis=1)
+        feet[:, 2] = 0
+        feet /= np.linalg.norm(feet, axis=-1, keepdims=True)
+        assert np.mean(np.sum(facing * feet, axis=-1) > 0.5) > 0.95
+        # the T-pose frame is gone: the first frame does not hold both arms out level
+        arms = joints[0, [J("l_wrist"), J("r_wrist")], 2] \
+            - joints[0, [J("l_shoulder"), J("r_shoulder")], 2]
+        assert np.abs(arms).max() > 0.08
+
+    def test_amc_walk_plants_its_feet(self, shared_data):
+        # the Acclaim rotation order read backwards slides the planted feet
+        take, _ = _take(str(shared_data / "cmu_more" / "asf_amc" / "35_01.amc"))
+        joints = take.joints()
+        toe = joints[:, J("l_toe")]
+        speed = np.linalg.norm(np.diff(toe[:, :2], axis=0), axis=-1) * take.fps
+        assert np.median(speed[toe[:-1, 2] < np.percentile(toe[:, 2], 20)]) < 0.15
+        assert np.linalg.norm(joints[-1, J("pelvis"), :2] - joints[0, J("pelvis"), :2]) > 3.0
+
+
+class TestFuzz:
+    """Malformed files of every kind end in one ZoopraxisError naming the file."""
+
+    def check(self, read, path):
+        try:
+            read(path)
+        except ZoopraxisError as error:
+            assert path.name in str(error) and "\n" not in str(error)
+
+    def test_bvh(self, tmp_path, rng):
+        path = tmp_path / "fuzz.bvh"
+        text = CHAIN.encode()
+        for trial in range(300):
+            data = bytearray(text)
+            kind = trial % 4
+            if kind == 0:                                   # truncated
+                data = data[:rng.integers(len(data))]
+            elif kind == 1:                                 # random bytes over a stretch
+                start = rng.integers(len(data))
+                data[start:start + 8] = rng.integers(0, 256, 8, dtype=np.uint8).tobytes()
+            elif kind == 2:                                 # a number made non-finite
+                tokens = text.decode().split(" ")
+                k = rng.integers(len(tokens))
+                tokens[k] = rng.choice(["nan", "inf", "-inf", "1e999"])
+                data = bytearray(" ".join(tokens).encode())
+            else:                                           # nothing but noise
+                data = rng.integers(0, 256, rng.integers(1, 400), dtype=np.uint8).tobytes()
+            path.write_bytes(bytes(data))
+            self.check(bvh.read_bvh, path)
+
+    def test_asf_amc(self, tmp_path, rng):
+        from zoopraxis.core import amc
+
+        for trial in range(200):
+            asf, motion = bytearray(ASF.encode()), bytearray(AMC.encode())
+            target = asf if trial % 2 else motion
+            if trial % 3 == 0:
+                del target[rng.integers(len(target)):]
+            else:
+                start = rng.integers(len(target))
+                target[start:start + 6] = rng.integers(0, 256, 6, dtype=np.uint8).tobytes()
+            (tmp_path / "leg.asf").write_bytes(bytes(asf))
+            (tmp_path / "leg_01.amc").write_bytes(bytes(motion))
+            try:
+                amc.read_amc(tmp_path / "leg_01.amc")
+            except ZoopraxisError as error:
+                assert ("leg_01.amc" in str(error) or "leg.asf" in str(error)) \
+                    and "\n" not in str(error)
+
+    def test_non_finite_value_named(self, tmp_path):
+        path = write(tmp_path, CHAIN.replace("1 2 3 90", "1 2 inf 90"))
+        with pytest.raises(ZoopraxisError, match=r"bad\.bvh:24: frame 0 has 'inf', not a finite"):
+            bvh.read_bvh(path)
+        path = write(tmp_path, CHAIN.replace("OFFSET 0 0 2", "OFFSET 0 nan 2"))
+        with pytest.raises(ZoopraxisError, match=r"bad\.bvh:16: .*'nan' is not a finite"):
+            bvh.read_bvh(path)
+
+
+def test_capture_paths_hold_subjects_out(tmp_path):
+    for name in ("a/02_01.bvh", "a/02_02.bvh", "b/35_01.amc", "b/35.asf", "b/notes.txt",
+                 "131_01.bvh"):
+        (tmp_path / name).parent.mkdir(exist_ok=True)
+        (tmp_path / name).write_text("")
+    stems = [p.stem for p in bvh.capture_paths(tmp_path)]
+    assert sorted(stems) == ["02_01", "02_02", "131_01", "35_01"]
+    assert [p.stem for p in bvh.capture_paths(tmp_path, hold_out=["02", "131"])] == ["35_01"]
+    assert bvh.subject_of("135_04") == "135"
+    with pytest.raises(ZoopraxisError, match="nowhere: no such folder"):
+        bvh.capture_paths(tmp_path / "nowhere")

@@ -1,0 +1,61 @@
+"""Learn the proportions prior of bodies fitted from one view from CMU motion capture.
+
+    .venv/bin/python tools/learn_proportions_prior.py [--data DIR ...] [--hold-out 02 35] \
+        [--out core/data/proportions_prior.npz] [--force]
+
+This is how ``core/data/proportions_prior.npz`` is built; run it again to rebuild it. Each
+performer's lengths (``body.LENGTH_DIMS``, ``fit3d.dims_from_joints``) are measured on the
+standard joints of all his captures (``bvh.read_take``: every CMU convention, ASF/AMC too),
+a frame every third of a second. Captures on cgspeed's Daz figure are left out: every
+performer there has that one figure's lengths. ``--hold-out`` leaves performers out
+altogether (the shipped file has them all; ``ProportionsPrior.load(exclude=...)`` does the
+same at load time, which is how the benchmarks judge it on performers it has not seen).
+"""
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from zoopraxis.core import bvh
+from zoopraxis.core.body import LENGTH_DIMS
+from zoopraxis.core.cli_common import check_output
+from zoopraxis.core.errors import ZoopraxisError
+from zoopraxis.core.proportions import DEFAULT_PROPORTIONS_PRIOR, ProportionsPrior
+
+REPO = Path(__file__).resolve().parents[1]
+DATA = [REPO.parent / "shared" / "data" / "cmu_more", REPO.parent / "shared" / "data" / "cmu_mocap"]
+FPS = 3.0       # frames a second measured: lengths are the same in every frame
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--data", type=Path, nargs="+", default=DATA)
+    parser.add_argument("--hold-out", nargs="*", default=[], metavar="SUBJECT",
+                        help="CMU subjects to leave out (02, 35, ...)")
+    parser.add_argument("--out", type=Path, default=DEFAULT_PROPORTIONS_PRIOR)
+    parser.add_argument("--force", action="store_true", help="replace an existing output")
+    args = parser.parse_args(argv)
+    try:
+        out = check_output(args.out, args.force)
+        joints = {}
+        for path in bvh.capture_paths(*args.data, hold_out=args.hold_out):
+            take = bvh.read_take(path)
+            if take.skeleton == "cmu_daz":
+                continue
+            joints.setdefault(take.subject, []).append(take.joints(FPS))
+        prior = ProportionsPrior.from_joints({s: np.concatenate(j) for s, j in joints.items()})
+        prior.save(out)
+    except ZoopraxisError as error:
+        print(f"learn_proportions_prior: error: {error}", file=sys.stderr)
+        return 2
+    mean, sigma = prior.mean_sigma()
+    print(f"{len(prior.subjects)} performers ({', '.join(prior.subjects)}) -> {out}")
+    for name, m, s in zip(LENGTH_DIMS, mean, sigma):
+        print(f"  {name:15s} {m:.3f} m  +- {100 * s:.1f} %")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
