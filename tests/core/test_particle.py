@@ -156,23 +156,29 @@ def test_arm_twist_is_uncertain_until_the_elbow_bends(arm):
 
 def test_walk_with_the_walking_prior(shared_data):
     """One view of CMU 131_03's walking cycle (core.synth), started from the ground-truth pose:
-    the Procrustes-aligned joint error stays low."""
+    the Procrustes-aligned joint error stays low, and lower than with the smooth-motion prior
+    (the shipped walking prior, of 51 cycles of 12 performers: 61 mm on average and 77 at
+    worst, against 73 and 131; the prior of subject 131's own seven cycles shipped before was
+    under 45 and 70)."""
     from zoopraxis.core import synth
 
     scene, joints = synth.take_from_bvh(shared_data / "cmu_mocap" / "131_03.bvh",
                                         frames=slice(97, 113), fps=30.0, views=1,
                                         image_size=(480, 360), noise=2.0, clutter=4)
     body, poses, _ = motion_prior.fit_body(make_body("sidenbladh"), joints[:1])
-    prior = motion_prior.WalkingPrior(body, fps=30.0)
-    pf = particle.ParticleFilter(body, scene.cameras, prior, n_particles=800, seed=5)
-    pf.start([scene.render_frame(0, 0)[0]], poses[0])
-    errors, lost = [], 0
-    for k in range(1, scene.num_frames):
-        step = pf.step([scene.render_frame(k, 0)[0]])
-        errors.append(procrustes_mpjpe(step.joints, joints[k]))
-        lost += step.status == "lost"
-    assert np.mean(errors) < 0.045 and max(errors) < 0.07
-    assert lost == 0
+    errors, lost = {}, {}
+    for name, prior in (("walk", motion_prior.WalkingPrior(body, fps=30.0)),
+                        ("smooth", motion_prior.SmoothMotionPrior(body, fps=30.0))):
+        pf = particle.ParticleFilter(body, scene.cameras, prior, n_particles=800, seed=5)
+        pf.start([scene.render_frame(0, 0)[0]], poses[0])
+        errors[name], lost[name] = [], 0
+        for k in range(1, scene.num_frames):
+            step = pf.step([scene.render_frame(k, 0)[0]])
+            errors[name].append(procrustes_mpjpe(step.joints, joints[k]))
+            lost[name] += step.status == "lost"
+    assert np.mean(errors["walk"]) < 0.065 and max(errors["walk"]) < 0.09
+    assert max(errors["walk"]) < 0.75 * max(errors["smooth"])
+    assert lost["walk"] == 0
 
 
 # -- partitioned annealing ----------------------------------------------------------------------
