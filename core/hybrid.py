@@ -363,9 +363,9 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
         return fg, [None if m is None else backgrounds[c].person(img, m)
                     for c, (img, m) in enumerate(zip(colour, fg))]
 
-    def images(colour, fg):
+    def images(colour, fg, person):
         return [prepare_images(to_gray_float(img), settings.levels, settings.smooth_sigma,
-                               fg[0][c], backgrounds[c].known if use_bg[c] else None, fg[1][c])
+                               fg[c], backgrounds[c].known if use_bg[c] else None, person[c])
                 for c, img in enumerate(colour)]
 
     def make_prior():
@@ -396,8 +396,8 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
         step = 1 if stop > start else -1
         st = state_at(start)
         colour = source.colour(start)
-        fg = masks(colour)
-        ims = images(colour, fg)
+        fg, person = masks(colour)
+        ims = images(colour, fg, person)
         renders = diff.render_views(st)
         diff.set_anchor(st, ims, renders)
         anchor_terms = diff.anchor_terms     # this pass's: another may set its own meanwhile
@@ -406,16 +406,16 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
         pf = ParticleFilter(body, work_cams, make_prior(), n_particles=particles,
                             seed=next(seeds), layers=layers, silhouette=silhouette)
         first = pf.start(colour, st.pose(0))
-        pf.likelihood.set_foreground(fg[1])
+        pf.likelihood.set_foreground(person)
         reference = covered_at(pf, st.pose(0))
         yield start, (st, None, first.spread, "ok", first.ess, reference)
         for f in range(start + step, stop + step, step):
             if cancel is not None and cancel():
                 raise Cancelled()
             colour = source.colour(f)
-            fg = masks(colour)
-            ims1 = images(colour, fg)
-            fs = pf.step(colour, fg[1])
+            fg, person = masks(colour)
+            ims1 = images(colour, fg, person)
+            fs = pf.step(colour, person)
             diff.anchor_terms = anchor_terms
             if tracker == "particle":
                 new = state_of(fs.pose)
