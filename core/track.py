@@ -349,7 +349,6 @@ def take_backgrounds(tracker, source, views, frames, inside, state_at, log):
                 f"(covers {cov:.0%} of the body); silhouettes off")
             continue
         fg = bg.foreground(colour0[c])
-        person = bg.person(colour0[c], fg)
         ref_fit[c] = model_coverage(r0[c].label >= 0, fg)
         ref_iou[c] = max(silhouette_iou(r0[c].label >= 0, fg), 0.05)
         if ref_fit[c] < MIN_ANCHOR_FIT:
@@ -358,7 +357,8 @@ def take_backgrounds(tracker, source, views, frames, inside, state_at, log):
                 "foreground at the anchor; silhouettes off")
             ref_fit[c] = ref_iou[c] = np.nan
             continue
-        ref_unexplained[c] = unexplained_fraction(person, r0[c].label, bg.known)
+        ref_unexplained[c] = unexplained_fraction(bg.person(colour0[c], fg), r0[c].label,
+                                                  bg.known)
     return backgrounds, use_bg, ref_fit, ref_iou, ref_unexplained
 
 
@@ -404,10 +404,7 @@ def remeasure(tracker, source, states, reports, anchor_frames, backgrounds, use_
     ref_fit, ref_iou, ref_unexplained : array, shape (V,)
         The first anchor's, the references of the frames' status.
     """
-    a0 = anchor_frames[0]
     usable = [u and bg is not None for u, bg in zip(use_bg, backgrounds)]
-    fit, iou, unexplained, _ = silhouette_measures(tracker, states[a0], source.colour(a0),
-                                                   backgrounds, usable)
     for f, rep in reports.items():
         if rep is None or f in anchor_frames:
             continue
@@ -415,6 +412,16 @@ def remeasure(tracker, source, states, reports, anchor_frames, backgrounds, use_
             tracker, states[f], source.colour(f), backgrounds, usable, limbs=limbs)
         if limb_fit is not None:
             rep.limb_fit = limb_fit
+    return anchor_references(tracker, source, states, anchor_frames, backgrounds, use_bg)
+
+
+def anchor_references(tracker, source, states, anchor_frames, backgrounds, use_bg):
+    """The first anchor's silhouette fit, overlap and unexplained foreground against
+    ``backgrounds``, where ``use_bg``: the references of the frames' status."""
+    a0 = anchor_frames[0]
+    usable = [u and bg is not None for u, bg in zip(use_bg, backgrounds)]
+    fit, iou, unexplained, _ = silhouette_measures(tracker, states[a0], source.colour(a0),
+                                                   backgrounds, usable)
     return fit, np.maximum(iou, 0.05), unexplained
 
 
@@ -1039,7 +1046,6 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
     # depth free, tracked walk131_single worse in two rounds: 202 mm PA against 145.)
     rounds = 2 if sum(use_bg) >= 2 else 1
     states, reports, cancelled = run_passes(0, rounds)
-    refined = None
     if cancelled:
         log("cancelled: keeping the frames tracked so far")
     elif rounds == 2:
@@ -1049,12 +1055,16 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
         backgrounds = [r if r is not None else b for r, b in zip(refined, backgrounds)]
         states, reports, cancelled = run_passes(1, rounds, before=total)
         if cancelled:
+            # the first round's frames were measured against the first backgrounds
             log("cancelled: keeping the first round's track")
             states, reports = first
-    if refined is not None:
-        # each frame's status against the backgrounds without the (first round's) body
-        ref_fit, ref_iou, ref_unexplained = remeasure(
-            tracker, source, states, reports, anchor_frames, refined, use_bg, limbs=calibrated)
+            ref_fit, ref_iou, ref_unexplained = remeasure(
+                tracker, source, states, reports, anchor_frames, refined, use_bg,
+                limbs=calibrated)
+        else:
+            # the second round measured its frames against these backgrounds already
+            ref_fit, ref_iou, ref_unexplained = anchor_references(
+                tracker, source, states, anchor_frames, backgrounds, use_bg)
 
     return make_result(body, views, plates, factors, states, reports, calibrated, init,
                         anchor_frames, frames, cancelled, ref_fit, ref_iou, ref_unexplained)
