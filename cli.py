@@ -19,15 +19,15 @@ PROG = "zoopraxis"
 
 COMMANDS = {
     "info": ("cli", "info", "print the versions of Zoopraxis, Python and its dependencies"),
-    "synth": ("core.cli_synth", "main",
+    "synth": ("core.commands.synth", "main",
               "render synthetic plates from motion capture, with ground truth and markers"),
-    "track": ("core.cli_track", "main",
+    "track": ("core.commands.track", "main",
               "track a body through plates from clicked joints and write result.json"),
-    "demo": ("core.cli_demo", "main", "run the whole pipeline on the bundled sample"),
-    "bake": ("core.cli_bake", "main", "key a tracked take onto an armature; write .blend, BVH, FBX"),
-    "calibrate": ("core.cli_calibrate", "main", "calibrate the cameras from a board in the plates"),
-    "init": ("core.cli_init", "main", "fit the body to the clicked joints of the anchor frames"),
-    "prior": ("core.cli_prior", "main",
+    "demo": ("core.commands.demo", "main", "run the whole pipeline on the bundled sample"),
+    "bake": ("addon.command_bake", "main", "key a tracked take onto an armature; write .blend, BVH, FBX"),
+    "calibrate": ("core.commands.calibrate", "main", "calibrate the cameras from a board in the plates"),
+    "init": ("core.commands.init", "main", "fit the body to the clicked joints of the anchor frames"),
+    "prior": ("core.commands.prior", "main",
               "learn the pose prior of one-view frames from captures or tracks of a motion"),
 }
 

@@ -18,8 +18,8 @@ import bpy
 import numpy as np
 
 from ..core.errors import ZoopraxisError
-from ..core.outputs import check_output
-from ..core.result import STATUSES, TrackResult, read_result
+from ..core.files.outputs import check_output
+from ..core.files.result import STATUSES, TrackResult, read_result
 from . import keying, motion, retarget
 
 ACTION_PREFIX = "Zoopraxis "
@@ -176,7 +176,7 @@ def _lathe(rings, bottom, top, n):
 
 def primitive_geometry(prims, n=16, n_rings=7):
     """Mesh vertices (reference frame), faces and the segment of every vertex of primitives."""
-    from ..core.render import ELLIPSOID
+    from ..core.imaging.render import ELLIPSOID
 
     verts, faces, seg = [], [], []
     offset = 0

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import bpy
 
-from ..core.calibfile import read_calibration, write_calibration
-from ..core.camera import PinholeCamera
+from ..core.files.calibfile import read_calibration, write_calibration
+from ..core.geometry.camera import PinholeCamera
 from ..core.errors import ZoopraxisError
 from . import convert
 from .plates import attach_background

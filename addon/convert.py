@@ -14,7 +14,7 @@ Only plain numbers cross into ``core``: matrices are converted to numpy at once.
 
 import numpy as np
 
-from ..core.camera import PinholeCamera
+from ..core.geometry.camera import PinholeCamera
 from ..core.errors import ZoopraxisError
 
 # The camera-axis flip between Blender (-Z forward, +Y up) and OpenCV (+z forward, y down).

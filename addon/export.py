@@ -14,7 +14,7 @@ import tempfile
 import bpy
 
 from ..core.errors import ZoopraxisError
-from ..core.outputs import check_output, replacing
+from ..core.files.outputs import check_output, replacing
 
 
 def _check(path, force, suffix):

@@ -11,10 +11,10 @@ frame ``f + o + 1`` (Blender numbers clip frames from 1). Marker positions are c
 
 import numpy as np
 
-from ..core.body import make_body
+from ..core.body.body import make_body
 from ..core.errors import ZoopraxisError
-from ..core.joints import JOINT_INDEX, STANDARD_JOINTS
-from ..core.markers import Anchor, read_markers, write_markers
+from ..core.body.joints import JOINT_INDEX, STANDARD_JOINTS
+from ..core.files.markers import Anchor, read_markers, write_markers
 from . import convert
 
 # Height of the stick figure laid out for dragging, as a fraction of the frame height.

@@ -5,15 +5,15 @@ segments through the body's product of exponentials (``BodyModel.seg2world``); a
 3D joints falls back to aiming each segment at its child joint.
 
 Convention: ``seg2world[f, k]`` maps the reference configuration (body standing, +Z up, facing
--Y, subject's left at +X; see :mod:`core.body`) to the world at frame ``f``. A bone built in the
+-Y, subject's left at +X; see :mod:`core.body.body`) to the world at frame ``f``. A bone built in the
 reference configuration with rest matrix ``B_k`` is at ``seg2world[f, k] @ B_k`` in the world.
 """
 
 import numpy as np
 
-from ..core import body as body_mod
+from ..core.body import body as body_mod
 from ..core.errors import ZoopraxisError
-from ..core.joints import JOINT_INDEX
+from ..core.body.joints import JOINT_INDEX
 
 # Where each segment's bone ends: the first of these reference points the body has.
 _TAILS = {

@@ -204,7 +204,7 @@ class ZOOPRAXIS_OT_calibrate_board(JobOperator, bpy.types.Operator):
     label = "Calibrate"
 
     def prepare(self, context):
-        from ..core.calibrate import parse_board
+        from ..core.calibration.calibrate import parse_board
         from . import pipeline
 
         settings = context.scene.zoopraxis
@@ -306,7 +306,7 @@ class ZOOPRAXIS_OT_flip_depth(bpy.types.Operator):
                                                   "or body")
 
     def execute(self, context):
-        from ..core.initialize import FLIP_PARTS
+        from ..core.initialize.fit import FLIP_PARTS
         from . import pipeline
 
         settings = context.scene.zoopraxis
@@ -344,7 +344,7 @@ class ZOOPRAXIS_OT_track(JobOperator, bpy.types.Operator):
     label = "Track"
 
     def prepare(self, context):
-        from ..core.outputs import check_output
+        from ..core.files.outputs import check_output
         from . import pipeline
         from .status import output_folder
 

@@ -3,7 +3,7 @@
 A draw handler of the Movie Clip Editor's main region draws, for the clip's view and the
 current frame, the tracked joints of the take's last result (``settings.result_path``, the
 file a track writes or the one picked to bake) as the stick figure of
-:data:`core.joints.STICK_BONES`: the subject's left in blue, right in red, the spine in white.
+:data:`core.body.joints.STICK_BONES`: the subject's left in blue, right in red, the spine in white.
 It reads ``joints2d`` per view, so calibrated and uncalibrated takes show alike. The scene's
 ``show_fit_overlay`` turns it on and off.
 
@@ -19,7 +19,7 @@ import bpy
 import numpy as np
 
 from ..core.errors import ZoopraxisError
-from ..core.joints import JOINT_INDEX, STICK_BONES
+from ..core.body.joints import JOINT_INDEX, STICK_BONES
 from . import convert
 
 LEFT_COLOR = (0.25, 0.5, 1.0, 1.0)
@@ -85,7 +85,7 @@ def stick_segments(result, view, frame, image_size):
 def last_result(settings):
     """The TrackResult at ``settings.result_path``, read once per file version; None if none
     or unreadable (the overlay then draws nothing)."""
-    from ..core.result import read_result
+    from ..core.files.result import read_result
 
     path = bpy.path.abspath(settings.result_path) if settings.result_path else ""
     if not path:

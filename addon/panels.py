@@ -8,7 +8,7 @@ import textwrap
 
 import bpy
 
-from ..core.joints import STANDARD_JOINTS
+from ..core.body.joints import STANDARD_JOINTS
 from .props import NOTE_PREFIX
 
 # Characters of a warning per line in the sidebar (labels do not wrap).

@@ -25,7 +25,7 @@ def _import(module, what):
         return importlib.import_module(f"..core.{module}", __package__)
     except ModuleNotFoundError as ex:
         if ex.name and ex.name.endswith(f"core.{module}"):
-            raise ZoopraxisError(f"{what} is not available in this build (core/{module}.py "
+            raise ZoopraxisError(f"{what} is not available in this build (core/{module.replace('.', '/')}.py "
                                  "is missing)") from None
         raise
 
@@ -72,12 +72,12 @@ class Take:
     perspective: bool = False   # uncalibrated views near the body: their perspective is fitted
 
     def prior(self):
-        """``pose_prior`` for :func:`core.initialize.initialize`."""
+        """``pose_prior`` for :func:`core.initialize.fit.initialize`."""
         return self.pose_prior or "default"
 
     def tilt(self):
-        """``camera_tilt`` for :func:`core.initialize.initialize` (uncalibrated takes)."""
-        from ..core.initialize import CAMERA_TILT_DEG
+        """``camera_tilt`` for :func:`core.initialize.fit.initialize` (uncalibrated takes)."""
+        from ..core.initialize.fit import CAMERA_TILT_DEG
 
         return (float(self.camera_tilt), CAMERA_TILT_DEG[1])
 
@@ -100,9 +100,9 @@ def gather(context, *, need_markers=True):
         No plates, an unreadable plate, views of different lengths, no or too few markers (a
         joint marked in no view), a calibrated view without a camera, a bad frame range.
     """
-    from ..core.markers import check_markers, only_views, uncalibrated_views
-    from ..core.plausible import check_calibration
-    from ..core.plates import check_same_length, open_plate
+    from ..core.files.markers import check_markers, only_views, uncalibrated_views
+    from ..core.files.plausible import check_calibration
+    from ..core.imaging.plates import check_same_length, open_plate
     from . import markers
     from .calibration import cameras_from_scene
 
@@ -169,10 +169,10 @@ def gather(context, *, need_markers=True):
 
     pose_prior = bpy.path.abspath(settings.pose_prior_path) if settings.pose_prior_path else ""
     read_file("Pose Prior", "clear the field for the shipped prior", pose_prior,
-              lambda *a: _import("initialize", "Initialization").resolve_pose_prior(*a))
+              lambda *a: _import("initialize.fit", "Initialization").resolve_pose_prior(*a))
     dims = read_file("Body Lengths From", "clear the field to fit the lengths",
                      bpy.path.abspath(settings.dims_path) if settings.dims_path else "",
-                     lambda *a: _import("cli_common", "Initialization").read_dims(*a))
+                     lambda *a: _import("commands.common", "Initialization").read_dims(*a))
     anchor_frames = {a.frame for a in anchors}
     flips = {f: p for f, p in parse_flips(settings.depth_flips).items() if f in anchor_frames}
     return Take(plates, paths, offsets, anchors, cameras, frames, template,
@@ -202,8 +202,8 @@ def format_flips(flips):
 
 
 def initialize(take, *, progress=None, cancel=None):
-    """Fit the body to the markers (:func:`core.initialize.initialize`)."""
-    module = _import("initialize", "initialization")
+    """Fit the body to the markers (:func:`core.initialize.fit.initialize`)."""
+    module = _import("initialize.fit", "initialization")
     if progress:
         progress(0, 1)
     inside = [a for a in take.anchors if a.frame in take.frames] or take.anchors
@@ -259,7 +259,7 @@ def forget(scene=None):
 
 
 def track(take, *, init=None, progress=None, cancel=None, log=None):
-    """Track the take (:func:`core.track.track`, or the particle/hybrid trackers)."""
+    """Track the take (:func:`core.take.track.track`, or the particle/hybrid trackers)."""
     options = dict(frames=take.frames, offsets=take.offsets, template=take.template, init=init,
                    progress=progress, cancel=cancel, log=log)
     flips = take.flips_at([a for a in take.anchors if a.frame in take.frames])
@@ -273,9 +273,9 @@ def track(take, *, init=None, progress=None, cancel=None, log=None):
         options["camera_tilt"] = take.tilt()
         options["perspective"] = take.perspective
     if take.tracker == "differential":
-        module = _import("track", "the differential tracker")
+        module = _import("take.track", "the differential tracker")
         return call(module.track, take.plates, take.anchors, take.cameras, **options)
-    module = _import("hybrid", f"the {take.tracker} tracker")
+    module = _import("trackers.hybrid", f"the {take.tracker} tracker")
     return call(module.track, take.plates, take.anchors, take.cameras, tracker=take.tracker,
                 **options)
 
@@ -293,7 +293,7 @@ class _ShiftedPlate:
 
 def calibrate(take, board, *, step=1, world_frame=None, max_rms=None, progress=None,
               cancel=None):
-    """Calibrate the cameras from a board seen in the plates (:func:`core.calibrate.calibrate`).
+    """Calibrate the cameras from a board seen in the plates (:func:`core.calibration.calibrate.calibrate`).
 
     The board is searched in the take's frames (every ``step``-th); the views are read in take
     frames, so their offsets line them up, and ``world_frame`` is a take frame too.
@@ -302,7 +302,7 @@ def calibrate(take, board, *, step=1, world_frame=None, max_rms=None, progress=N
     ----------
     take : Take
     board : core.calibrate.Board
-        From :func:`core.calibrate.parse_board`.
+        From :func:`core.calibration.calibrate.parse_board`.
     step : int
     world_frame : int, optional
         Take frame whose board pose defines the world; default: the calibration's choice.
@@ -314,7 +314,7 @@ def calibrate(take, board, *, step=1, world_frame=None, max_rms=None, progress=N
     result : core.calibrate.CalibrationResult
         ``cameras`` and ``rms`` by view name, ``world_frame``, ``warnings``.
     """
-    module = _import("calibrate", "board calibration")
+    module = _import("calibration.calibrate", "board calibration")
     plates = {v: _ShiftedPlate(p, take.offsets.get(v, 0), take.num_frames)
               for v, p in take.plates.items()}
     options = dict(step=step, world_frame=world_frame, progress=progress, cancel=cancel)

@@ -1,6 +1,6 @@
 """Load plates into the scene: a movie clip per view, the frame range, rate and resolution.
 
-Plates are opened with :mod:`core.plates` first (the reader the tracker uses), so anything the
+Plates are opened with :mod:`core.imaging.plates` first (the reader the tracker uses), so anything the
 tracker could not read is refused before the scene changes.
 """
 
@@ -9,9 +9,9 @@ from pathlib import Path
 import bpy
 
 from ..core.errors import ZoopraxisError
-from ..core.joints import STANDARD_JOINTS
-from ..core.plates import IMAGE_EXTENSIONS, natural_key, open_plate
-from ..core.plausible import check_frame_rates
+from ..core.body.joints import STANDARD_JOINTS
+from ..core.imaging.plates import IMAGE_EXTENSIONS, natural_key, open_plate
+from ..core.files.plausible import check_frame_rates
 from . import convert
 
 

@@ -8,7 +8,7 @@ import bpy
 from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProperty,
                        IntProperty, PointerProperty, StringProperty)
 
-from ..core.body import TEMPLATES
+from ..core.body.body import TEMPLATES
 from .preferences import TRACKERS
 from .retarget import PRESETS
 

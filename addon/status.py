@@ -11,8 +11,8 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from ..core.joints import STANDARD_JOINTS
-from ..core.result import TrackResult, write_result
+from ..core.body.joints import STANDARD_JOINTS
+from ..core.files.result import TrackResult, write_result
 
 
 def output_folder():

@@ -1,9 +1,9 @@
 """Benchmark: differential tracker vs particle filter vs hybrid on fast motion.
 
 Bregler & Malik's differential tracker fails "when the motion from frame to frame is very
-large" and they propose a coarse search stage in front of it; the hybrid (``core/hybrid.py``)
+large" and they propose a coarse search stage in front of it; the hybrid (``core/trackers/hybrid.py``)
 puts Sidenbladh et al.'s particle filter there. Two takes from real motion capture, rendered by
-``core.synth`` (another body than the tracker's, textured clothes, clutter, sensor noise), each
+``core.synthetic.synth`` (another body than the tracker's, textured clothes, clutter, sensor noise), each
 tracked by the three trackers from the animator's clicks at frame 0 (2 px noise, fitted by the
 initialization; ``--init truth`` starts from the true pose):
 

@@ -38,9 +38,9 @@ from zoopraxis.core import body as bm  # noqa: E402
 from zoopraxis.core import calibrate as cal  # noqa: E402
 from zoopraxis.core import initialize as init  # noqa: E402
 from zoopraxis.core import se3, synth  # noqa: E402
-from zoopraxis.core.camera import PinholeCamera, look_at, ring_of_cameras  # noqa: E402
-from zoopraxis.core.joints import JOINT_INDEX, STANDARD_JOINTS  # noqa: E402
-from zoopraxis.core.markers import Anchor  # noqa: E402
+from zoopraxis.core.geometry.camera import PinholeCamera, look_at, ring_of_cameras  # noqa: E402
+from zoopraxis.core.body.joints import JOINT_INDEX, STANDARD_JOINTS  # noqa: E402
+from zoopraxis.core.files.markers import Anchor  # noqa: E402
 
 NOISE_PX = 2.0
 # One uncalibrated view: this many times the trials of the other rows (see body_model_cases).
@@ -213,7 +213,7 @@ def body_model_cases(table, rng, n):
 
 def cmu_joints(name):
     """The standard joints of a CMU take of the shared data, at 30 fps."""
-    from zoopraxis.core import bvh
+    from zoopraxis.core.files import bvh
 
     return bvh.standard_joints(bvh.load_cmu(CMU / f"{name}.bvh", fps=30))
 
@@ -235,7 +235,7 @@ def cmu_cases(table, rng, n):
     the frame's own take (leave one take out: 131_01 is judged by a prior from 131_02, 131_03
     and 01_01, and so on; 01_01 is subject 1, the only capture of that subject, so its prior
     has never seen that subject)."""
-    from zoopraxis.core import fit3d
+    from zoopraxis.core.body import fit3d
 
     if not CMU.is_dir():
         print(f"  (no CMU data at {CMU}: CMU cases skipped)", file=sys.stderr)
@@ -289,7 +289,7 @@ def known_lengths_cases(table, rng, n):
     init fitted to three frames of another take of the same performer (131_01 and 131_03 of
     subject 131 each other's; 01_01, subject 1's only take, three of its frames the row does
     not judge) with the same click noise."""
-    from zoopraxis.core import fit3d
+    from zoopraxis.core.body import fit3d
 
     if not CMU.is_dir():
         return
@@ -326,7 +326,7 @@ def one_view_anchors_cases(table, rng, n, apart=25):
     in one camera, each judged. CMU takes, held-out pose prior, as in the one-view CMU row.
     (It barely does: a length shorter than the prior's and a foreshortened one click alike
     in every frame, only a longer one shows; ``--dims-from`` is the remedy.)"""
-    from zoopraxis.core import fit3d
+    from zoopraxis.core.body import fit3d
 
     if not CMU.is_dir():
         return
@@ -362,7 +362,7 @@ def length_error_cases(table, rng, n, errors=(0.0, 0.01, 0.02, 0.05)):
     true lengths kept, each off by a random relative error of spread ``errors`` (independent
     per length). The depth of a limb follows its length, so a few per cent cost what the whole
     fit of the lengths costs."""
-    from zoopraxis.core import fit3d
+    from zoopraxis.core.body import fit3d
 
     if not CMU.is_dir():
         return
@@ -463,9 +463,10 @@ def finetune_cases(table, frames, rng):
     """Fine-tuning after tracking: a synthetic walk (CMU 131_02) in 2 calibrated views; the
     starting body's lengths 9 % too long, the anchor posed from its 2 px clicks with them. The
     backgrounds estimated from the plates (the default), or given as clean plates."""
-    from zoopraxis.core import finetune as ft
-    from zoopraxis.core import fit3d, synth
-    from zoopraxis.core.track import Initial
+    from zoopraxis.core.take import finetune as ft
+    from zoopraxis.core.body import fit3d
+    from zoopraxis.core.synthetic import synth
+    from zoopraxis.core.take.track import Initial
 
     if not CMU.is_dir():
         print(f"  (no CMU data at {CMU}: fine-tuning case skipped)", file=sys.stderr)
@@ -577,7 +578,7 @@ def limits_cases(table, rng, n):
         judge("body model, 1 uncalibrated, 1080p @100m", X, cams, clicks(cams, X, rng), kind,
               body.dims)
     if CMU.is_dir():
-        from zoopraxis.core import fit3d
+        from zoopraxis.core.body import fit3d
 
         everything = init.PosePrior.load()
         for name in ("131_01", "131_03", "01_01"):
@@ -613,8 +614,9 @@ def held_out_subjects_cases(table, rng, n):
     prior of the other performers (``initialize(..., proportions=...)``); and, beside them,
     the performer's true lengths kept. Each row also apart for the performers captured with
     their own lengths and for those on cgspeed's one Daz figure."""
-    from zoopraxis.core import bvh, fit3d
-    from zoopraxis.core.proportions import ProportionsPrior
+    from zoopraxis.core.files import bvh
+    from zoopraxis.core.body import fit3d
+    from zoopraxis.core.priors.proportions import ProportionsPrior
 
     if not MORE.is_dir():
         print(f"  (no data at {MORE}: held-out subject cases skipped)", file=sys.stderr)

@@ -12,7 +12,7 @@ Three experiments, one table:
   shows nothing of its twist: the twist's spread stays wide, then collapses once the elbow
   bends. Error: 3D distance of elbow and wrist from the truth.
 - ``walk``: one view of CMU 131_03's walking cycle (frames 97-130 at 30 fps, the only steady
-  forward cycle of that take) rendered by ``core.synth`` (its own body, clothes, clutter and
+  forward cycle of that take) rendered by ``core.synthetic.synth`` (its own body, clothes, clutter and
   noise), tracked with the walking prior from the ground-truth pose of the first frame (the
   ``sidenbladh`` body fitted to the CMU joints). Error: MPJPE after a per-frame similarity
   (Procrustes) alignment. The honest rows use a prior that has not seen the walk tracked:
@@ -44,10 +44,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from zoopraxis.core import motion_prior, particle, se3, synth
-from zoopraxis.core.background import estimate_background
-from zoopraxis.core.body import Pose, make_body
-from zoopraxis.core.camera import PinholeCamera, look_at
+from zoopraxis.core.priors import motion_prior
+from zoopraxis.core.trackers import particle
+from zoopraxis.core.geometry import se3
+from zoopraxis.core.synthetic import synth
+from zoopraxis.core.imaging.background import estimate_background
+from zoopraxis.core.body.body import Pose, make_body
+from zoopraxis.core.geometry.camera import PinholeCamera, look_at
 
 CMU = Path(__file__).resolve().parents[2] / "shared" / "data" / "cmu_mocap"
 OUTPUT = Path(__file__).resolve().parent / "output"
@@ -60,7 +63,7 @@ HELD_OUT = {"131_03, subject 131 out": ("131_03", WALK_FRAMES, "subject:131"),
             "131_03, take out": ("131_03", WALK_FRAMES, "131_03"),
             "131_02 c1, cycle out": ("131_02", slice(129, 157), "131_02:1")}
 FPS = 30.0
-# Silhouette cue weight of the walk rows that use it (see core/likelihood.py).
+# Silhouette cue weight of the walk rows that use it (see core/trackers/likelihood.py).
 SILHOUETTE = 3.0
 
 

@@ -23,8 +23,8 @@ import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
 from zoopraxis.core import markers, plates  # noqa: E402
-from zoopraxis.core.contact_sheet import contact_sheet  # noqa: E402
-from zoopraxis.core.track import track  # noqa: E402
+from zoopraxis.core.imaging.contact_sheet import contact_sheet  # noqa: E402
+from zoopraxis.core.take.track import track  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 DATA = Path(os.environ.get("ZOOPRAXIS_SHARED_DATA", HERE.parents[1] / "shared" / "data"))

@@ -9,8 +9,8 @@ import time
 
 import numpy as np
 
-from zoopraxis.core.camera import PinholeCamera, look_at
-from zoopraxis.core.render import Primitives, cylinder, ellipsoid, render, render_points
+from zoopraxis.core.geometry.camera import PinholeCamera, look_at
+from zoopraxis.core.imaging.render import Primitives, cylinder, ellipsoid, render, render_points
 
 RUNS = 20
 

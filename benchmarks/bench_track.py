@@ -34,8 +34,8 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 import numpy as np  # noqa: E402
 
 from zoopraxis.core import fit3d, synth  # noqa: E402
-from zoopraxis.core.joints import JOINT_INDEX, STANDARD_JOINTS  # noqa: E402
-from zoopraxis.core.markers import Anchor  # noqa: E402
+from zoopraxis.core.body.joints import JOINT_INDEX, STANDARD_JOINTS  # noqa: E402
+from zoopraxis.core.files.markers import Anchor  # noqa: E402
 
 DATA = Path(os.environ.get("ZOOPRAXIS_SHARED_DATA",
                            Path(__file__).resolve().parents[2] / "shared" / "data"))
@@ -103,7 +103,7 @@ def write_plates(scene, folder):
     """Render a synthetic take into PNG image folders and open them as plates."""
     import cv2
 
-    from zoopraxis.core.plates import open_plate
+    from zoopraxis.core.imaging.plates import open_plate
 
     out = {}
     for v, cam in enumerate(scene.cameras):
@@ -117,7 +117,7 @@ def write_plates(scene, folder):
 
 
 def run_case(name, spec, *, quick, init_mode, anchor_every, workers=1, whole_passes=False):
-    from zoopraxis.core import track as T
+    from zoopraxis.core.take import track as T
 
     bvh, start, n, views, calibrated, noise, clutter, build, fps, every = spec
     anchor_every = anchor_every or every
@@ -192,7 +192,7 @@ def main(argv=None):
                    help="track both passes between two anchors from anchor to anchor (the "
                         "default stops each a little past the middle, track.BLEND_REACH)")
     args = p.parse_args(argv)
-    from zoopraxis.core.track import default_workers
+    from zoopraxis.core.take.track import default_workers
 
     workers = args.workers or default_workers()
     print(f"{os.cpu_count()} cores; passes of multi-anchor takes in {workers} processes")

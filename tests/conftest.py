@@ -23,7 +23,7 @@ def shared_data_dir():
 def slow_walk_take(n):
     """``n`` frames of a slow synthetic walk (CMU 131_02 from frame 200) in 2 calibrated
     320x240 views, and its true joints; skips the test without the shared data."""
-    from zoopraxis.core import synth
+    from zoopraxis.core.synthetic import synth
 
     data = shared_data_dir()
     if data is None:

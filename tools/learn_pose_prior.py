@@ -1,13 +1,13 @@
 """Learn the pose prior of single-view initialization from CMU motion capture.
 
     .venv/bin/python tools/learn_pose_prior.py [--data DIR ...] [--hold-out 02 35] \
-        [--step 8] [--out core/data/pose_prior.npz] [--force]
+        [--step 8] [--out core/priors/data/pose_prior.npz] [--force]
 
-This is how ``core/data/pose_prior.npz`` is built; run it again to rebuild it. Steps:
+This is how ``core/priors/data/pose_prior.npz`` is built; run it again to rebuild it. Steps:
 
 1. read every capture under the data folders (by default ``../shared/data/cmu_more``, 76
    takes of 17 performers in every CMU convention, and ``../shared/data/cmu_mocap``) at 30 fps
-   and take its 17 standard joints (``core.bvh.read_take``: the manifest's frame rates, the
+   and take its 17 standard joints (``core.files.bvh.read_take``: the manifest's frame rates, the
    T-pose frames dropped), leaving out the performers of ``--hold-out``;
 2. fit the ``full`` body to every ``step``-th frame (``initialize.take_angles``: the lengths
    measured on the joints, then each frame's root and angles), as ``zoopraxis prior`` does
@@ -27,9 +27,9 @@ import sys
 from pathlib import Path
 
 from zoopraxis import cli
-from zoopraxis.core import bvh
+from zoopraxis.core.files import bvh
 from zoopraxis.core.errors import ZoopraxisError
-from zoopraxis.core.initialize import DEFAULT_POSE_PRIOR
+from zoopraxis.core.initialize.fit import DEFAULT_POSE_PRIOR
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = [REPO.parent / "shared" / "data" / "cmu_more", REPO.parent / "shared" / "data" / "cmu_mocap"]
@@ -50,7 +50,7 @@ def main(argv=None):
         print(f"learn_pose_prior: error: {error}", file=sys.stderr)
         return 2
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    # the same work as ``zoopraxis prior`` (core/cli_prior.py), which names takes by file stem
+    # the same work as ``zoopraxis prior`` (core/commands/prior.py), which names takes by file stem
     command = ["prior", *map(str, paths), "--step", str(args.step), "--out", str(args.out)] \
         + ["--force"] * args.force
     return cli.main(command)

@@ -1,9 +1,9 @@
 """Learn the proportions prior of bodies fitted from one view from CMU motion capture.
 
     .venv/bin/python tools/learn_proportions_prior.py [--data DIR ...] [--hold-out 02 35] \
-        [--out core/data/proportions_prior.npz] [--force]
+        [--out core/priors/data/proportions_prior.npz] [--force]
 
-This is how ``core/data/proportions_prior.npz`` is built; run it again to rebuild it. Each
+This is how ``core/priors/data/proportions_prior.npz`` is built; run it again to rebuild it. Each
 performer's lengths (``body.LENGTH_DIMS``, ``fit3d.dims_from_joints``) are measured on the
 standard joints of all his captures (``bvh.read_take``: every CMU convention, ASF/AMC too),
 a frame every third of a second. Captures on cgspeed's Daz figure are left out: every
@@ -18,11 +18,11 @@ from pathlib import Path
 
 import numpy as np
 
-from zoopraxis.core import bvh
-from zoopraxis.core.body import LENGTH_DIMS
-from zoopraxis.core.cli_common import check_output
+from zoopraxis.core.files import bvh
+from zoopraxis.core.body.body import LENGTH_DIMS
+from zoopraxis.core.commands.common import check_output
 from zoopraxis.core.errors import ZoopraxisError
-from zoopraxis.core.proportions import DEFAULT_PROPORTIONS_PRIOR, ProportionsPrior
+from zoopraxis.core.priors.proportions import DEFAULT_PROPORTIONS_PRIOR, ProportionsPrior
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = [REPO.parent / "shared" / "data" / "cmu_more", REPO.parent / "shared" / "data" / "cmu_mocap"]

@@ -1,7 +1,7 @@
 """Learn the walking prior (Sidenbladh, Black & Fleet 2000, §6.2) from every walk in CMU captures.
 
     .venv/bin/python tools/learn_walk_prior.py [--data DIR ...] [--takes 02_01 35_01 ...] \
-        [--hold-out SUBJECT ...] [--exclude TAKE[:K] ...] [--out core/data/walk_prior.npz] \
+        [--hold-out SUBJECT ...] [--exclude TAKE[:K] ...] [--out core/priors/data/walk_prior.npz] \
         [--force]
 
 By default every capture under ``../shared/data/cmu_more`` and ``../shared/data/cmu_mocap``
@@ -11,7 +11,7 @@ benchmarks track subject 131's walk with a prior learned ``--hold-out 131``); ``
 leaves takes out, or single cycles, ``TAKE:K`` for the K-th cycle (from 0) found in TAKE
 (leave-one-cycle-out).
 
-This is how ``core/data/walk_prior.npz`` is built; run it again to rebuild it. Steps:
+This is how ``core/priors/data/walk_prior.npz`` is built; run it again to rebuild it. Steps:
 
 1. read each capture at 60 fps and take its 17 standard joints;
 2. cut the steady forward walking into gait cycles, each from the left foot passing the right
@@ -35,10 +35,11 @@ from pathlib import Path
 
 import numpy as np
 
-from zoopraxis.core import bvh, motion_prior
-from zoopraxis.core.body import make_body
+from zoopraxis.core.files import bvh
+from zoopraxis.core.priors import motion_prior
+from zoopraxis.core.body.body import make_body
 from zoopraxis.core.errors import ZoopraxisError
-from zoopraxis.core.joints import JOINT_INDEX
+from zoopraxis.core.body.joints import JOINT_INDEX
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = [REPO.parent / "shared" / "data" / "cmu_more", REPO.parent / "shared" / "data" / "cmu_mocap"]

@@ -11,7 +11,7 @@ from test_addon_support import (blender, bpy, matrix_np, registered,  # noqa: F4
 
 from zoopraxis.addon import bake as bake_mod
 from zoopraxis.core.errors import ZoopraxisError
-from zoopraxis.core.joints import JOINT_INDEX
+from zoopraxis.core.body.joints import JOINT_INDEX
 
 # Which bone end carries each standard joint in the full template.
 JOINT_BONE_END = {

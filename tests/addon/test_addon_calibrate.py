@@ -7,9 +7,9 @@ import pytest
 
 from test_addon_support import blender, bpy, registered  # noqa: F401
 
-from zoopraxis.core import calibrate as cal
-from zoopraxis.core import se3
-from zoopraxis.core.camera import PinholeCamera, look_at
+from zoopraxis.core.calibration import calibrate as cal
+from zoopraxis.core.geometry import se3
+from zoopraxis.core.geometry.camera import PinholeCamera, look_at
 
 BOARD = "checkerboard:9x6:0.1"
 

@@ -6,7 +6,7 @@ import pytest
 from test_addon_support import blender, bpy, registered  # noqa: F401
 
 from zoopraxis.addon import convert
-from zoopraxis.core.camera import PinholeCamera, look_at
+from zoopraxis.core.geometry.camera import PinholeCamera, look_at
 
 
 def make_camera(size=(640, 480), fx=700.0, fy=None, c=None, name="cam0"):

@@ -41,7 +41,7 @@ def scene_state():
 
 def test_load_plates_and_calibration(blender, tmp_path):
     from zoopraxis.addon.calibration import cameras_from_scene
-    from zoopraxis.core.calibfile import read_calibration
+    from zoopraxis.core.files.calibfile import read_calibration
 
     settings = load_sample()
     scene = blender.scene
@@ -98,7 +98,7 @@ def test_unreadable_plate_and_unequal_lengths_leave_scene_alone(blender, tmp_pat
 
 def test_joint_markers_keep_user_tracks_and_round_trip(blender, tmp_path):
     from zoopraxis.addon import markers
-    from zoopraxis.core.markers import read_markers
+    from zoopraxis.core.files.markers import read_markers
 
     settings = load_sample(("cam0", "cam1"))
     clip = settings.views[0].clip
@@ -145,7 +145,7 @@ def test_joint_markers_keep_user_tracks_and_round_trip(blender, tmp_path):
 
 def test_sample_markers_import_matches_file(blender):
     from zoopraxis.addon import markers
-    from zoopraxis.core.markers import read_markers
+    from zoopraxis.core.files.markers import read_markers
 
     settings = load_sample()
     bpy.ops.zoopraxis.import_markers(filepath=str(SAMPLE / "markers.json"))
@@ -162,8 +162,8 @@ def test_sample_markers_import_matches_file(blender):
 
 def test_joint_marked_in_no_view_is_refused(blender, monkeypatch, tmp_path):
     from zoopraxis.addon import pipeline
-    from zoopraxis.core.joints import STANDARD_JOINTS
-    from zoopraxis.core.markers import Anchor, write_markers
+    from zoopraxis.core.body.joints import STANDARD_JOINTS
+    from zoopraxis.core.files.markers import Anchor, write_markers
 
     settings = load_sample(("cam0",))
     clicked = {j: (100.0 + i, 100.0) for i, j in enumerate(STANDARD_JOINTS) if j != "r_toe"}
@@ -205,7 +205,7 @@ def test_track_operator_with_injected_worker(blender, monkeypatch, tmp_path):
     assert bpy.ops.zoopraxis.track() == {'FINISHED'}
     take = seen["take"]
     assert take.frames == range(10, 30) and set(take.plates) == {"cam0", "cam1", "cam2"}
-    from zoopraxis.core.markers import read_markers
+    from zoopraxis.core.files.markers import read_markers
 
     assert take.cameras is None     # no calibration loaded: uncalibrated
     assert [a.frame for a in take.anchors] == [a.frame for a in read_markers(
@@ -226,13 +226,13 @@ def test_track_operator_with_injected_worker(blender, monkeypatch, tmp_path):
 
 def test_initialize_operator_with_injected_worker(blender, monkeypatch):
     from zoopraxis.addon import pipeline
-    from zoopraxis.core.body import make_body
+    from zoopraxis.core.body.body import make_body
 
     settings = load_sample()
     bpy.ops.zoopraxis.load_calibration(filepath=str(SAMPLE / "calibration.json"))
     bpy.ops.zoopraxis.import_markers(filepath=str(SAMPLE / "markers.json"))
 
-    from zoopraxis.core.markers import read_markers
+    from zoopraxis.core.files.markers import read_markers
 
     full = make_body("full")
 
@@ -416,7 +416,7 @@ def test_panels_draw_steps(blender):
 
 def test_real_pipeline_on_sample_tracks_and_bakes(blender, monkeypatch, tmp_path):
     """The adapter against the real workers: calibrated sample, three frames."""
-    pytest.importorskip("zoopraxis.core.track")
+    pytest.importorskip("zoopraxis.core.take.track")
     import json
 
     from zoopraxis.addon import status
@@ -463,7 +463,7 @@ def test_one_view_flips_in_depth_from_the_panel(blender):
     click undoes it."""
     from zoopraxis.addon import pipeline
     from zoopraxis.addon.panels import _draw_init_notes
-    from zoopraxis.core.initialize import ONE_VIEW_LENGTHS_NOTE
+    from zoopraxis.core.initialize.fit import ONE_VIEW_LENGTHS_NOTE
 
     settings = load_sample(("cam0",))
     bpy.ops.zoopraxis.import_markers(filepath=str(SAMPLE / "markers.json"))
@@ -559,7 +559,7 @@ def test_pose_prior_file_from_the_panel(blender, tmp_path):
     starts."""
     import json
 
-    from zoopraxis.core import initialize as init
+    from zoopraxis.core.initialize import fit as init
 
     truth = json.loads((SAMPLE / "truth.json").read_text())
     X = np.array(truth["joints3d"][truth["frames"].index(47)])
@@ -599,7 +599,7 @@ def test_body_lengths_file_from_the_panel(blender, tmp_path):
     import json
 
     from zoopraxis import cli
-    from zoopraxis.core.body import LENGTH_DIMS
+    from zoopraxis.core.body.body import LENGTH_DIMS
 
     three = tmp_path / "three.json"
     assert cli.main(["init", "--markers", str(SAMPLE / "markers.json"), "--calibration",
@@ -637,7 +637,7 @@ def test_near_cameras_from_the_panel(blender, monkeypatch):
 
     from zoopraxis.addon import pipeline
     from zoopraxis.addon.panels import VIEW3D_PT_zoopraxis
-    from zoopraxis.core import initialize as core_init
+    from zoopraxis.core.initialize import fit as core_init
 
     def drawn():
         log = []

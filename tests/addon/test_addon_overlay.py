@@ -5,7 +5,7 @@ import numpy as np
 
 from test_addon_support import blender, bpy, registered, synthetic_result  # noqa: F401
 
-from zoopraxis.core.joints import JOINT_INDEX, STICK_BONES
+from zoopraxis.core.body.joints import JOINT_INDEX, STICK_BONES
 
 
 def test_stick_segments_are_clip_coordinates_of_the_view_and_frame():

@@ -86,7 +86,7 @@ def test_retarget_onto_mixamo_rig_with_other_rolls(blender, rng):
     W = np.array(rig.matrix_world)
     for seg, joint in (("LeftArm", "l_shoulder"), ("RightLeg", "r_knee"), ("LeftFoot", "l_ankle"),
                        ("Hips", "pelvis"), ("Neck", "neck")):
-        from zoopraxis.core.joints import JOINT_INDEX
+        from zoopraxis.core.body.joints import JOINT_INDEX
 
         for i, frame in enumerate(frames):
             blender.scene.frame_set(int(frame))

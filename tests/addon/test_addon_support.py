@@ -45,8 +45,9 @@ def synthetic_result(n_frames=20, template="full", *, seed=2345, angles=True, vi
     result : TrackResult
     body : BodyModel
     """
-    from zoopraxis.core import body as body_mod, se3
-    from zoopraxis.core.result import TrackResult
+    from zoopraxis.core.body import body as body_mod
+    from zoopraxis.core.geometry import se3
+    from zoopraxis.core.files.result import TrackResult
 
     body = body_mod.make_body(template)
     rng = np.random.default_rng(seed)
@@ -73,7 +74,7 @@ def synthetic_result(n_frames=20, template="full", *, seed=2345, angles=True, vi
 
 
 def write_result(path, result):
-    from zoopraxis.core.result import write_result as write
+    from zoopraxis.core.files.result import write_result as write
 
     write(path, result)
     return path

@@ -1,0 +1,109 @@
+"""``zoopraxis init``: pose, angles and body dimensions from the clicked joints (markers.json)."""
+
+import argparse
+import json
+import sys
+
+from .common import (add_camera_tilt_argument, add_dims_argument, add_output_arguments,
+                         add_perspective_argument, add_pose_prior_arguments,
+                         check_output, check_template, check_uncalibrated_options,
+                         parse_camera_tilt, parse_flips, parse_pose_prior, read_dims)
+from ..errors import ZoopraxisError
+
+
+def build_parser():
+    p = argparse.ArgumentParser(
+        prog="zoopraxis init",
+        description="Fit the body model to the clicked joints of the anchor frames: root pose, "
+                    "joint angles and body dimensions (Bregler & Malik §2.6). Without "
+                    "--calibration every view gets a scaled orthographic camera per anchor.")
+    p.add_argument("--markers", required=True, help="markers.json with the clicked joints")
+    p.add_argument("--calibration", default=None,
+                   help="calibration.json or Pose2Sim / anipose TOML (default: uncalibrated)")
+    p.add_argument("--plate", action="append", metavar="NAME=PATH", required=True,
+                   help="a view: video file or folder of images (repeat for every view)")
+    p.add_argument("--template", default="full",
+                   help="body template: full, muybridge, sidenbladh or yamamoto (full)")
+    p.add_argument("--fixed-dims", action="store_true",
+                   help="keep the template's body dimensions instead of fitting them")
+    add_dims_argument(p)
+    add_pose_prior_arguments(p)
+    p.add_argument("--flip", action="append", default=[], metavar="FRAME:PART",
+                   help="at an anchor frame clicked in one view, turn a body part to its other "
+                        "depth (PART: left-arm, right-arm, left-leg, right-leg or body); "
+                        "repeat for more")
+    add_camera_tilt_argument(p)
+    add_perspective_argument(p)
+    add_output_arguments(p, "init.json")
+    return p
+
+
+def main(argv):
+    from ..body.body import LENGTH_DIMS
+    from ..files.calibfile import check_views, read_calibration
+    from .calibrate import parse_plate_options
+    from .common import open_plates
+    from ..initialize.fit import initialize
+    from ..files.markers import check_markers, read_markers
+    from ..files.outputs import write_text
+    from ..files.plausible import check_calibration
+
+    args = build_parser().parse_args(argv)
+    out = check_output(args.out, args.force, inputs=[
+        ("--markers", args.markers), ("--calibration", args.calibration),
+        ("--dims-from", args.dims_from), ("--pose-prior", args.pose_prior),
+        *((f"--plate {view}", path) for view, path in parse_plate_options(args.plate).items())])
+    check_template(args.template)
+    flips = parse_flips(args.flip)
+    camera_tilt = parse_camera_tilt(args.camera_tilt)
+    pose_prior = parse_pose_prior(args, args.template)
+    check_uncalibrated_options(args, bool(args.calibration))
+    dims = read_dims(args.dims_from, args.template) if args.dims_from else None
+    plates = open_plates(parse_plate_options(args.plate))
+    views = list(plates)
+    anchors = read_markers(args.markers)
+    check_markers(anchors, views, min(p.num_frames for p in plates.values()), args.markers,
+                  image_sizes={v: p.image_size for v, p in plates.items()})
+    if args.calibration:
+        cameras = check_views(read_calibration(args.calibration), views, args.calibration)
+        for name, camera in cameras.items():
+            if tuple(camera.image_size) != tuple(plates[name].image_size):
+                raise ZoopraxisError(
+                    f"{args.calibration}: camera '{name}' is {camera.image_size[0]}x"
+                    f"{camera.image_size[1]} but plate '{name}' is {plates[name].image_size[0]}x"
+                    f"{plates[name].image_size[1]}")
+        for warning in check_calibration(cameras, anchors, args.calibration):
+            print(f"warning: {warning}")
+    else:
+        cameras = {name: plate.image_size for name, plate in plates.items()}
+    mode = "calibrated" if args.calibration else "uncalibrated"
+    print(f"init: fitting {len(anchors)} anchor frame{'s' if len(anchors) > 1 else ''} in "
+          f"{len(views)} view{'s' if len(views) > 1 else ''} ({mode})", file=sys.stderr,
+          flush=True)
+    result = initialize(anchors, cameras, template=args.template,
+                        calibrated=bool(args.calibration), dims=dims,
+                        fit_dims=not (args.fixed_dims or dims),
+                        views=views, pose_prior=pose_prior,
+                        flips=flips, camera_tilt=camera_tilt, perspective=args.perspective)
+    print("body dimensions (m): " + ", ".join(f"{name} {result.body.dims[name]:.3f}"
+                                             for name in LENGTH_DIMS)
+          + (f" (kept from {args.dims_from})" if dims else ""))
+    print("rms per view (px): " + ", ".join(f"{view} {rms:.2f}"
+                                           for view, rms in result.rms.items()))
+    if args.perspective:
+        print(result.distance_note())
+    for warning in result.warnings:
+        print(f"warning: {warning}")
+    for note in result.flip_notes():
+        print(note)
+    for note in result.notes:
+        print(f"note: {note}")
+    if result.ambiguous:
+        print("warning: the 3D pose is ambiguous (see above)")
+    for frame, parts in sorted(result.ambiguous_parts.items()):
+        options = " ".join(f"--flip {frame}:{p.replace(' ', '-')}" for p in parts)
+        print(f"frame {frame}: look at the fitted body; if it is wrong there, run again with "
+              f"{options}")
+    write_text(out, json.dumps(result.to_json(), indent=1) + "\n")
+    print(f"wrote {out}")
+    return 0

@@ -1,0 +1,3 @@
+"""Rigid-body and camera geometry: twists and SE(3) (se3), pinhole, distortion and scaled
+orthographic cameras (camera). Imports numpy, scipy, OpenCV and core.errors only.
+"""

@@ -1,0 +1,3 @@
+"""Synthetic plates with ground truth, for tests, the demo and benchmarks. May import geometry,
+body, imaging and files.
+"""

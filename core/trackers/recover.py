@@ -1,0 +1,439 @@
+"""Limb recovery: a silhouette search for a limb the image-motion step left behind.
+
+Gauss-Newton on image motion only follows what moves a few pixels at the coarsest level. A
+kick or a fast arm swing moves a shin further than that, and once the model's leg is left
+behind the frame-to-frame motion cannot bring it back: the appearance under it is now the
+background or the other leg. Bregler & Malik call for a coarse search in front of the
+differential step; this is the cheapest one that works from the plates themselves.
+
+For each limb (each leg, each arm) in turn, with the rest of the body held, poses of the limb's
+joints are drawn around the current ones and scored on the foreground silhouettes of all views:
+points sampled inside the limb's primitives should project inside the foreground (by the signed
+distance), and into foreground that the rest of the body does not already explain. Drawing is
+done in two rounds (wide, then narrow around the best). Everything is vectorized over draws and
+points; the whole search costs a few milliseconds a frame. When a limb's best draw clearly beats
+its current pose, the tracker refines from it (:meth:`DifferentialTracker.step` with ``start``).
+"""
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from ..imaging.render import CYLINDER
+
+# Standard deviations of the first round of draws, radians, by joint.
+WIDTHS = {"hip": 0.5, "knee": 0.7, "ankle": 0.3, "shoulder": 0.6, "elbow": 0.7}
+POINTS_PER_PRIMITIVE = 48
+SHRINK = 0.6            # points lie this far out towards the surface (robust to other builds)
+SDF_SCALE = 3.0         # pixels of signed distance for a full +-1 score
+SHARED_CREDIT = 0.4     # credit for foreground that the rest of the body already covers
+# Search a limb scoring below this. A leg that fits scores 0.75-1; one left behind by a kick
+# with its thigh still in place scores 0.3-0.6 (measured on bench_track's walk3, where such a
+# leg stayed 0.5 m off for 70 frames under a lower threshold). An arm in front of or behind
+# the torso in most views scores low even where it belongs (its points fall on the rest of the
+# body): search arms only when they are mostly outside the silhouettes.
+POOR = {"leg": 0.6, "arm": 0.0}
+PROBE_DRAWS = 48        # draws of the quick check before a full search of a fitting limb
+UNEXPLAINED_BONUS = 0.6  # extra credit for foreground that no part of the model covers
+UNEXPLAINED_MIN_PX = 5  # unexplained foreground thinner than this is the build, not a limb
+
+
+@dataclass
+class LimbGroup:
+    """One limb: its joint angles and the segments they move."""
+
+    name: str
+    dofs: np.ndarray        # indices into the angles
+    widths: np.ndarray      # first-round standard deviations, radians
+    segments: np.ndarray    # segment indices of the limb
+    stages: list = None     # (dofs, segments) searched in turn, proximal first
+
+
+def limb_groups(body):
+    """Each leg and each arm of ``body`` as a :class:`LimbGroup` (templates without a limb
+    simply have fewer groups)."""
+    groups = []
+    for side in "lr":
+        for limb, joints, segs in (("leg", ("hip", "knee", "ankle"), ("thigh", "shank", "foot")),
+                                   ("arm", ("shoulder", "elbow"), ("upper_arm", "forearm"))):
+            dofs, widths, stages = [], [], []
+            for j, sname in zip(joints, segs):
+                stage = [i for i, name in enumerate(body.dof_names)
+                         if name.startswith(f"{side}_{j}")]
+                seg = [k for k, n in enumerate(body.segment_names) if n == f"{side}_{sname}"]
+                dofs += stage
+                widths += [WIDTHS[j]] * len(stage)
+                if stage and seg:
+                    stages.append((np.array(stage), np.array(seg)))
+            seg = [k for k, n in enumerate(body.segment_names)
+                   if any(n == f"{side}_{s}" for s in segs)]
+            if dofs and seg:
+                # proximal joint first (the thigh alone), then the rest of the limb
+                staged = stages[:1] + ([(np.concatenate([d for d, _ in stages[1:]]),
+                                         np.concatenate([k for _, k in stages[1:]]))]
+                                       if len(stages) > 1 else [])
+                groups.append(LimbGroup(f"{'left' if side == 'l' else 'right'} {limb}",
+                                        np.array(dofs), np.array(widths), np.array(seg),
+                                        staged))
+    return groups
+
+
+def interior_points(prims, n=POINTS_PER_PRIMITIVE, shrink=SHRINK, seed=0):
+    """Points inside each primitive, in its segment's coordinates.
+
+    Returns
+    -------
+    segment : array of int, shape (M,)
+    points : array, shape (M, 3)
+    """
+    rng = np.random.default_rng(seed)
+    segs, pts = [], []
+    for p in range(len(prims)):
+        size = prims.size[p]
+        if prims.kind[p] == CYLINDER:
+            z = rng.uniform(0.05, 0.95, n) * size[2]
+            r = 1 + (prims.taper[p] - 1) * z / size[2]
+            a = rng.uniform(0, 2 * np.pi, n)
+            rad = shrink * np.sqrt(rng.uniform(0.2, 1.0, n))
+            local = np.column_stack([size[0] * r * rad * np.cos(a),
+                                     size[1] * r * rad * np.sin(a), z])
+        else:
+            d = rng.normal(size=(n, 3))
+            d /= np.linalg.norm(d, axis=1, keepdims=True)
+            local = shrink * np.sqrt(rng.uniform(0.2, 1.0, n))[:, None] * d * size
+        T = prims.prim2seg[p]
+        pts.append(local @ T[:3, :3].T + T[:3, 3])
+        segs.append(np.full(n, prims.segment[p]))
+    return np.concatenate(segs), np.concatenate(pts)
+
+
+def unexplained_foreground(foreground, labels, known=None, min_px=UNEXPLAINED_MIN_PX):
+    """Foreground that the model's support map does not cover, in blobs at least ``min_px``
+    thick (a thin rim is a body of another build than the model's, not a missing limb), where
+    the background is known (elsewhere "foreground" only means "never seen empty")."""
+    model = cv2.dilate((labels >= 0).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+    rest = foreground & ~model
+    if known is not None:
+        rest &= known
+    rest = rest.astype(np.uint8)
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (min_px, min_px))
+    return cv2.morphologyEx(rest, cv2.MORPH_OPEN, kernel) > 0
+
+
+def unexplained_share(unexplained, labels):
+    """Unexplained foreground (a mask from :func:`unexplained_foreground`) as a fraction of
+    the model's area in its support map ``labels``."""
+    return float(unexplained.sum() / max(int((labels >= 0).sum()), 1))
+
+
+def _transform_points(T, points, out):
+    """``out[n, m] = T[n] @ points[m]`` (rigid transforms (N, 4, 4), points (M, 3)).
+
+    Each coordinate is summed as ``(r0 x + r2 z) + r1 y``, the order numpy's einsum takes for
+    this three-term product, so the values equal those of ``np.einsum("nij,mj->nmi", ...)``
+    exactly, at a fraction of its time.
+    """
+    x, y, z = points[:, 0], points[:, 1], points[:, 2]
+    for i in range(3):
+        c = T[:, i, 0, None] * x
+        c += T[:, i, 2, None] * z
+        c += T[:, i, 1, None] * y
+        c += T[:, i, 3, None]
+        out[..., i] = c
+
+
+class _RestOfBody:
+    """The pixels the model covers with segments other than a limb's, looked up at the
+    scored points only (``rest[v, u]``), not formed as a full mask."""
+
+    def __init__(self, labels, segments):
+        self.labels = labels
+        n = max(int(labels.max()) + 2, int(np.max(segments)) + 2)
+        self.table = np.ones(n, bool)
+        self.table[0] = False                   # background (-1)
+        self.table[np.asarray(segments) + 1] = False
+
+    def __getitem__(self, index):
+        return self.table[self.labels[index] + 1]
+
+    def flat_take(self, flat):
+        """``self[v, u]`` for the flat pixel indices ``v * W + u``."""
+        labels = np.take(self.labels, flat)
+        labels += 1
+        return np.take(self.table, labels)
+
+
+def _rest_of_body(labels, group):
+    """Per view, the pixels the model covers with segments other than the limb's."""
+    return [None if lab is None else _RestOfBody(lab, group.segments) for lab in labels]
+
+
+class LimbSearch:
+    """Silhouette search over each limb's joint angles (see the module notes).
+
+    Parameters
+    ----------
+    body : BodyModel
+    draws : int
+        Draws per round and limb (the current pose is always one of them).
+    margin : float
+        How much better (in the score's units, -1..1 per point) a limb's best draw must be
+        than its current pose to be proposed.
+    poor : dict of str to float, optional
+        Per limb kind ("leg", "arm"), the score below which a limb is searched (a limb inside
+        the silhouettes is left to the image-motion step, which is more precise). Default
+        :data:`POOR`.
+    attract : tuple of str
+        Limbs ("leg", "arm") that are also searched, and drawn, towards foreground no part of
+        the model explains. Legs only by default: arms hang beside a torso that the model's
+        may not fill out (another build), and would be drawn into the gap.
+    seed : int
+    """
+
+    def __init__(self, body, draws=160, margin=0.08, poor=None, seed=0, attract=("leg",)):
+        self.body = body
+        self.poor = dict(POOR if poor is None else poor)
+        self.attract = attract
+        self.draws = draws
+        self.margin = margin
+        self.seed = seed
+        self.rng = np.random.default_rng(seed)
+        self.groups = limb_groups(body)
+        self.point_segment, self.points = interior_points(body.primitives())
+        self._blocks = {}
+        self._fit_at = None     # (roots, angles, sdfs, labels, scores) of the last search
+
+    def reseed(self, key=()):
+        """Restart the draws from a seed made of the search's own and ``key`` (non-negative
+        ints, e.g. a tracking pass's first and last frame), so a pass draws the same samples
+        whatever ran before it."""
+        self.rng = np.random.default_rng([self.seed, *(int(k) for k in key)])
+
+    def score(self, roots, angles, segments, cameras, sdfs, rest, unexplained=None,
+              plain=False):
+        """Silhouette score of a batch of poses for one limb, mean over points and views.
+
+        Parameters
+        ----------
+        roots : array, shape (V, 4, 4)
+            The root of each view (the same world root when calibrated).
+        angles : array, shape (N, n_dofs)
+        segments : array of int
+            The segments whose points are scored.
+        cameras : list of camera
+        sdfs : list of array (H, W) or None
+            Signed distance to the foreground (negative inside) per view; None skips a view.
+        rest : list of array of bool (H, W) or None
+            Pixels the rest of the body covers.
+        unexplained : list of array of bool (H, W) or None, optional
+            Foreground that no part of the model covers (thick blobs only): where a limb
+            left behind has gone.
+
+        plain : bool
+            Also return the score without the credit for unexplained foreground (what
+            ``unexplained=None`` gives).
+
+        Returns
+        -------
+        score : array, shape (N,)
+        plain_score : array, shape (N,)
+            With ``plain`` only.
+        """
+        key = tuple(int(k) for k in segments)
+        blocks = self._blocks.get(key)
+        if blocks is None:
+            # the limb's points, segment by segment: (position in segments, points)
+            blocks = self._blocks[key] = [(i, self.points[self.point_segment == k])
+                                          for i, k in enumerate(key)]
+        m = sum(len(pts) for _, pts in blocks)
+        n = len(angles)
+        total = np.zeros(n)
+        total_plain = np.zeros(n) if plain else None
+        used = 0
+        T = None
+        for c, cam in enumerate(cameras):
+            if sdfs[c] is None:
+                continue
+            if T is None or not np.array_equal(roots[c], roots[c - 1]):
+                # only the limb's chain moves its points
+                T = self.body.seg2world_of(roots[c][None], angles, key)
+                X = np.empty((n, m, 3))
+                lo = 0
+                for i, pts in blocks:
+                    _transform_points(T[:, i], pts, X[:, lo:lo + len(pts)])
+                    lo += len(pts)
+            uv = cam.project(X.reshape(-1, 3)).reshape(n, -1, 2)
+            h, w = sdfs[c].shape
+            u = np.clip(np.rint(uv[..., 0]), 0, w - 1).astype(np.intp)
+            v = np.clip(np.rint(uv[..., 1]), 0, h - 1).astype(np.intp)
+            off = (uv[..., 0] < 0) | (uv[..., 0] > w - 1) | (uv[..., 1] < 0) | (uv[..., 1] > h - 1)
+            flat = v
+            flat *= w
+            flat += u
+            s = np.take(sdfs[c], flat)
+            s /= -SDF_SCALE
+            np.clip(s, -1.0, 1.0, out=s)
+            s[off] = -1.0
+            if rest is not None and rest[c] is not None:
+                covered = rest[c].flat_take(flat) if isinstance(rest[c], _RestOfBody) \
+                    else np.take(rest[c], flat)
+                shared = s > 0
+                shared &= covered
+                s[shared] *= SHARED_CREDIT
+            if plain:
+                total_plain += s.mean(axis=1)
+            if unexplained is not None and unexplained[c] is not None:
+                bonus = np.take(unexplained[c], flat)
+                bonus &= ~off
+                s = s + UNEXPLAINED_BONUS * bonus       # float64 from here on
+            total += s.mean(axis=1)
+            used += 1
+        if plain:
+            return total / max(used, 1), total_plain / max(used, 1)
+        return total / max(used, 1)
+
+    def search(self, state, sdfs, rest_labels, known=None, person=None):
+        """Best pose of each limb in turn; returns the new angles and the limbs that moved.
+
+        Parameters
+        ----------
+        state : differential.State
+        sdfs : list of array (H, W) or None
+            Per view at the cameras' resolution.
+        rest_labels : list of array of int (H, W) or None
+            The model's support map at ``state`` per view (segment labels, -1 background).
+        known : list of array of bool (H, W) or None, optional
+            Where each view's background model has seen the background.
+        person : list of array of bool (H, W) or None, optional
+            The foreground without cast shadows, where a limb may be drawn to (default: the
+            foreground of ``sdfs``).
+
+        Returns
+        -------
+        angles : array, shape (n_dofs,)
+        moved : list of (str, float)
+            Limbs whose draw won, with the score gained.
+        """
+        angles = state.angles.copy()
+        moved = []
+        self.last_scores = {}
+        plain_scores = {}
+        known = known or [None] * len(sdfs)
+        person = person or [None] * len(sdfs)
+        unexplained = [None if d is None or lab is None else
+                       unexplained_foreground(d < 0 if p is None else p, lab, k)
+                       for d, lab, k, p in zip(sdfs, rest_labels, known, person)]
+        self.last_unexplained = unexplained     # of the pose searched from, for the caller
+        for group in self.groups:
+            rest = _rest_of_body(rest_labels, group)
+            best, gain = self._search_group(state.roots, angles, group, state.cameras, sdfs,
+                                            rest, unexplained, plain_scores)
+            if gain > self.margin:
+                angles = best
+                moved.append((group.name, float(gain)))
+                # what this limb now covers is explained: other limbs must not go there too
+                unexplained = self._clear(unexplained, state.roots, angles, group,
+                                          state.cameras)
+        # Nothing moved: every limb was scored at ``state``, which is what :meth:`fit` asks
+        # for next (with the same silhouettes and support maps).
+        self._fit_at = None if moved else (state.roots.tobytes(), state.angles.tobytes(),
+                                           list(sdfs), list(rest_labels), plain_scores)
+        return angles, moved
+
+    def _clear(self, unexplained, roots, angles, group, cameras, radius=4):
+        sel = np.isin(self.point_segment, group.segments)
+        out = []
+        for c, cam in enumerate(cameras):
+            u_mask = unexplained[c]
+            if u_mask is None:
+                out.append(None)
+                continue
+            T = self.body.seg2world(roots[c], angles)[self.point_segment[sel]]
+            X = np.einsum("mij,mj->mi", T[:, :3, :3], self.points[sel]) + T[:, :3, 3]
+            uv = np.rint(cam.project(X)).astype(np.intp)
+            h, w = u_mask.shape
+            ok = (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
+            hit = np.zeros((h, w), np.uint8)
+            hit[uv[ok, 1], uv[ok, 0]] = 1
+            k = 2 * radius + 1
+            hit = cv2.dilate(hit, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k)))
+            out.append(u_mask & (hit == 0))
+        return out
+
+    def fit(self, state, sdfs, labels):
+        """Silhouette score of every limb at ``state`` (see :meth:`search` for the inputs).
+
+        Returns
+        -------
+        dict of str to float
+            Limb name -> mean score in [-1, 1]: near 1 when the limb lies inside the
+            foreground of every view, below 0 when it lies mostly outside.
+        """
+        def same(xs, ys):
+            return len(xs) == len(ys) and all(x is y for x, y in zip(xs, ys))
+
+        known = self._fit_at
+        if (known is not None and known[0] == state.roots.tobytes()
+                and known[1] == state.angles.tobytes()
+                and same(known[2], sdfs) and same(known[3], labels)):
+            return dict(known[4])       # the search scored these limbs at this pose
+        out = {}
+        for group in self.groups:
+            rest = _rest_of_body(labels, group)
+            out[group.name] = float(self.score(state.roots, state.angles[None], group.segments,
+                                               state.cameras, sdfs, rest)[0])
+        return out
+
+    def _search_group(self, roots, angles, group, cameras, sdfs, rest, unexplained,
+                      plain_scores=None):
+        """Best pose of one limb and the score it gains; ``plain_scores`` (dict), if given,
+        gets the limb's score at ``angles`` without the credit for unexplained foreground."""
+        if not group.name.endswith(self.attract):
+            unexplained = [None] * len(unexplained)
+        current, current_plain = self.score(roots, angles[None], group.segments, cameras, sdfs,
+                                            rest, unexplained, plain=True)
+        current = current[0]
+        if plain_scores is not None:
+            plain_scores[group.name] = float(current_plain[0])
+        self.last_scores[group.name] = current
+        poor = self.poor.get(group.name.split()[-1], 0.0)
+        if current >= poor:
+            if not any(u is not None and u.any() for u in unexplained):
+                return angles, 0.0
+            # The limb fits; only unexplained foreground could call it away. A cheap probe
+            # (few draws, the whole limb at once) decides whether a full search is worth it.
+            probe = np.repeat(angles[None], PROBE_DRAWS, axis=0)
+            probe[1:, group.dofs] = self.rng.uniform(self.body.lower[group.dofs],
+                                                     self.body.upper[group.dofs],
+                                                     size=(PROBE_DRAWS - 1, len(group.dofs)))
+            gain = self.score(roots, probe, group.segments, cameras, sdfs, rest,
+                              unexplained).max() - current
+            if gain < 0.5 * self.margin:
+                return angles, 0.0
+        centre = angles
+        lower, upper = self.body.lower, self.body.upper
+        # Each stage: half the draws uniform over the joints' range, half around the current
+        # pose; then a narrower round around the stage's best.
+        for dofs, segs in group.stages:
+            best = self.score(roots, centre[None], segs, cameras, sdfs, rest, unexplained)[0]
+            width = np.array([group.widths[list(group.dofs).index(d)] for d in dofs])
+            for spread in (1.0, 0.3):
+                trial = np.repeat(centre[None], self.draws, axis=0)
+                noise = self.rng.normal(size=(self.draws - 1, len(dofs))) * width * spread
+                trial[1:, dofs] += noise
+                if spread == 1.0:
+                    half = self.draws // 2
+                    trial[half:, dofs] = self.rng.uniform(lower[dofs], upper[dofs],
+                                                          size=(self.draws - half, len(dofs)))
+                trial = self.body.clamp(trial)
+                s = self.score(roots, trial, segs, cameras, sdfs, rest, unexplained)
+                k = int(np.argmax(s))
+                if s[k] > best:
+                    centre, best = trial[k], s[k]
+        final = self.score(roots, centre[None], group.segments, cameras, sdfs, rest,
+                           unexplained)[0]
+        return centre, final - current
+
+
+__all__ = ["LimbSearch", "LimbGroup", "limb_groups", "interior_points"]

@@ -1,0 +1,65 @@
+"""Limbs kept apart: sphere proxies, penetration, and its Jacobian."""
+
+import numpy as np
+import pytest
+
+from zoopraxis.core.body import body as bm
+from zoopraxis.core.body import collision
+from zoopraxis.core.geometry import se3
+
+
+@pytest.mark.parametrize("template", bm.TEMPLATES)
+def test_rest_pose_does_not_penetrate(template):
+    body = bm.make_body(template)
+    proxies = collision.body_proxies(body)
+    assert len(proxies.pairs) > 50
+    assert collision.penetration(proxies, body.seg2world(body.rest_pose())).max() == 0.0
+
+
+def test_arm_through_the_chest_penetrates():
+    body = bm.make_body("full")
+    pose = body.rest_pose()
+    pose.angles[body.dof_index("l_shoulder_abd")] = np.radians(-30)   # adduct into the body
+    pose.angles[body.dof_index("l_shoulder_flex")] = np.radians(10)
+    proxies = collision.body_proxies(body)
+    assert collision.penetration(proxies, body.seg2world(pose)).max() > 0.02
+    # crossing the legs through each other too
+    pose = body.rest_pose()
+    pose.angles[body.dof_index("l_hip_abd")] = np.radians(-25)
+    assert collision.penetration(proxies, body.seg2world(pose)).max() > 0.02
+
+
+def test_penalty_jacobian_against_finite_differences(rng):
+    body = bm.make_body("full")
+    pose = body.rest_pose(se3.transform(p=[0, 0, 1.0]))
+    pose.angles[body.dof_index("l_shoulder_abd")] = np.radians(-30)
+    pose.angles[body.dof_index("l_hip_abd")] = np.radians(-20)
+    proxies = collision.body_proxies(body)
+    T, Jseg = body.kinematics(pose)
+    r, J = collision.penalty_system(proxies, T, Jseg)
+    assert len(r) > 0
+    h = 1e-6
+    for k in (6 + body.dof_index("l_shoulder_abd"), 6 + body.dof_index("l_hip_abd"), 0, 4):
+        d = np.zeros(body.n_params)
+        d[k] = h
+        rp = collision.penetration(proxies, body.seg2world(pose.retract(d)))
+        rm = collision.penetration(proxies, body.seg2world(pose.retract(-d)))
+        full = (rp - rm) / (2 * h)
+        active = collision.penetration(proxies, T) > 0
+        assert np.allclose(full[active], J[:, k], atol=1e-5)
+
+
+def test_gauss_newton_on_the_penalty_separates_the_limbs():
+    body = bm.make_body("full")
+    pose = body.rest_pose()
+    pose.angles[body.dof_index("l_shoulder_abd")] = np.radians(-30)
+    proxies = collision.body_proxies(body)
+    for _ in range(10):
+        T, Jseg = body.kinematics(pose)
+        r, J = collision.penalty_system(proxies, T, Jseg)
+        if not len(r):
+            break
+        J = J[:, 6:]
+        delta = -np.linalg.lstsq(J, r, rcond=None)[0]
+        pose.angles = body.clamp(pose.angles + delta)
+    assert collision.penetration(proxies, body.seg2world(pose)).max() < 1e-3

@@ -1,0 +1,149 @@
+"""Background model: the fast paths of estimate_background give the straightforward values."""
+
+import numpy as np
+import pytest
+
+from zoopraxis.core.imaging import background as bg
+
+
+def walking_block(n, rng, size=(64, 48)):
+    """A textured background and a textured block that crosses it, as uint8 frames."""
+    W, H = size
+    back = rng.integers(0, 256, (H, W, 3)).astype(np.uint8)
+    frames, masks = [], []
+    for f in range(n):
+        frame = np.clip(back + rng.normal(0, 2, back.shape), 0, 255).astype(np.uint8)
+        mask = np.zeros((H, W), bool)
+        x = 4 + (f * 3) % (W - 20)
+        mask[10:40, x:x + 14] = True
+        frame[mask] = rng.integers(0, 256, (mask.sum(), 3))
+        frames.append(frame)
+        masks.append(mask)
+    return frames, masks
+
+
+@pytest.mark.parametrize("n", [5, 12, 25])
+def test_agreement_counts_every_pair(n):
+    rng = np.random.default_rng(n)
+    frames, masks = walking_block(n, rng)
+    samples = np.stack([bg._as_float(f) for f in frames])
+    free = rng.uniform(size=samples.shape[:3]) > 0.2
+    tol2 = np.float32(0.03)
+    got = bg._agreement(samples, free, tol2)
+    # every pair measured from both ends
+    expected = np.zeros(samples.shape[:3], np.int64)
+    for i in range(n):
+        d = samples - samples[i]
+        close = np.einsum("...c,...c->...", d, d) < tol2
+        expected[i] = (close & free).sum(axis=0)
+    np.testing.assert_array_equal(got, expected)
+
+
+def test_estimate_background_finds_the_background_behind_a_mover():
+    rng = np.random.default_rng(3)
+    frames, masks = walking_block(12, rng)
+    back = np.median(np.stack([f for f in frames]), axis=0)
+    model = bg.estimate_background(frames, exclude=[(frames[0], masks[0])])
+    seen = ~np.any(np.stack(masks), axis=0)
+    # where the block never passed, the model is the noisy background's mean
+    assert np.abs(model.image[seen] * 255 - back[seen]).max() < 6
+    assert model.known[seen].mean() > 0.95
+    fg = model.foreground(frames[5])
+    assert (fg & masks[5]).sum() > 0.8 * masks[5].sum()
+    assert (fg & seen).sum() < 0.02 * seen.sum()
+
+
+def test_sorting_network_sorts():
+    # 0-1 principle: a comparator network sorts everything iff it sorts every 0-1 input
+    for n in range(1, 15):
+        x = list(((np.arange(2 ** n)[:, None] >> np.arange(n)) & 1).T.astype(np.int8))
+        expected = np.sort(np.array(x), axis=0)
+        for i, j in bg._sorting_network(n):
+            assert i < j
+            x[i], x[j] = np.minimum(x[i], x[j]), np.maximum(x[i], x[j])
+        np.testing.assert_array_equal(np.array(x), expected)
+
+
+@pytest.mark.parametrize("n", [3, 4, 7, 10, 24, 25, 31, 40])
+def test_median_over_frames_is_numpys(n):
+    rng = np.random.default_rng(n)
+    # quantised like images, so ties are common
+    stack = (rng.integers(0, 256, (n, 9, 11, 3)) / np.float32(255)).astype(np.float32)
+    got = bg._median_over_frames(stack)
+    assert got.dtype == np.float32
+    np.testing.assert_array_equal(got, np.median(stack, axis=0))
+    before = stack.copy()
+    continuous = rng.uniform(0, 1, (n, 9, 11, 3)).astype(np.float32)
+    np.testing.assert_array_equal(bg._median_over_frames(continuous),
+                                  np.median(continuous, axis=0))
+    np.testing.assert_array_equal(stack, before)       # the input is left alone
+    odd = stack.copy()
+    odd[0, 0, 0, 0] = np.nan
+    odd[1, 1, 1, 1] = -0.5
+    np.testing.assert_array_equal(bg._median_over_frames(odd), np.median(odd, axis=0))
+
+
+def shadow_scene(seed=0, size=(96, 72)):
+    """A textured floor, the same floor with a cast shadow (dimmed to 55 %, slightly bluer
+    light), a red block (clothes), and a near-black block (dark clothes)."""
+    rng = np.random.default_rng(seed)
+    W, H = size
+    base = np.array([90, 120, 150], float)          # BGR: a beige floor
+    back = np.clip(base * rng.uniform(0.7, 1.3, (H, W, 1)), 0, 255)
+    frame = back.copy()
+    shadow = np.zeros((H, W), bool)
+    shadow[40:64, 5:60] = True
+    frame[shadow] = back[shadow] * [0.6, 0.55, 0.52]
+    clothes = np.zeros((H, W), bool)
+    clothes[8:36, 30:50] = True
+    frame[clothes] = [40, 40, 170]
+    dark = np.zeros((H, W), bool)
+    dark[8:36, 60:80] = True
+    frame[dark] = [14, 15, 16]
+    noisy = [np.clip(back + rng.normal(0, 2, back.shape), 0, 255).astype(np.uint8)
+             for _ in range(6)]
+    frame = np.clip(frame + rng.normal(0, 2, frame.shape), 0, 255).astype(np.uint8)
+    return noisy, frame, shadow, clothes, dark
+
+
+def test_shadow_is_the_background_dimmed_not_clothes():
+    frames, frame, shadow, clothes, dark = shadow_scene()
+    model = bg.estimate_background(frames)
+    fg = model.foreground(frame)
+    # the foreground holds the shadow: a plain difference cannot tell it from the body
+    assert fg[shadow].mean() > 0.9
+    found = model.shadow(frame)
+    inner = shadow.copy()
+    inner[[40, 63], :] = False
+    assert found[inner].mean() > 0.9
+    assert found[clothes].mean() < 0.05
+    assert found[dark].mean() < 0.02          # darker than any shadow the light leaves
+    person = model.person(frame, fg)
+    assert person[clothes].mean() > 0.9 and person[dark].mean() > 0.9
+    assert person[shadow].mean() < 0.1
+
+
+def test_tracked_masks_keep_a_person_who_stood_still_out_of_the_background():
+    rng = np.random.default_rng(5)
+    W, H = 64, 48
+    back = rng.integers(0, 256, (H, W, 3)).astype(np.uint8)
+    person = rng.integers(0, 256, (30, 14, 3)).astype(np.uint8)
+    frames, masks = [], []
+    for f in range(15):
+        frame = np.clip(back + rng.normal(0, 2, back.shape), 0, 255).astype(np.uint8)
+        mask = np.zeros((H, W), bool)
+        x = 25 if 3 <= f < 12 else 4 + 3 * f % 40      # still for 9 of 15 frames
+        mask[10:40, x:x + 14] = True
+        frame[mask] = person.reshape(-1, 3)
+        frames.append(frame)
+        masks.append(mask)
+    still = np.zeros((H, W), bool)
+    still[10:40, 25:39] = True
+    truth = back[still].astype(float) / 255
+    plain = bg.estimate_background(frames)
+    tracked = bg.estimate_background(frames, masks=np.stack(masks))
+    # the person's own colours win the plain estimate where they stood
+    assert np.abs(plain.image[still] - truth).max(axis=1).mean() > 0.2
+    assert np.abs(tracked.image[still] - truth).max(axis=1).mean() < 0.03
+    assert tracked.foreground(frames[6])[still].mean() > 0.9
+    assert plain.foreground(frames[6])[still].mean() < 0.2

@@ -1,0 +1,384 @@
+"""Differential tracker: one Gauss-Newton step recovers a known motion.
+
+These unit tests render the tracker's own body model (textured) so that the only error left
+is the solver's; the benchmark (benchmarks/bench_track.py) uses other shapes and real motion.
+"""
+
+import numpy as np
+import pytest
+
+from zoopraxis.core.trackers import differential as D
+from zoopraxis.core.imaging import plates
+from zoopraxis.core.geometry import se3
+from zoopraxis.core.synthetic import synth
+from zoopraxis.core.body.body import make_body
+from zoopraxis.core.geometry.camera import ScaledOrthoCamera, look_at, ring_of_cameras
+
+SIZE = (320, 240)
+
+
+def two_poses(body):
+    p0 = body.rest_pose(se3.transform(p=[0, 0, 0.95]))
+    for name, value in (("l_knee_flex", 0.3), ("r_hip_flex", 0.3), ("l_elbow_flex", 0.5)):
+        p0.angles[body.dof_index(name)] = value
+    delta = np.zeros(body.n_params)
+    delta[:6] = [0.01, -0.015, 0.005, 0.0, 0.0, 0.03]
+    for name, value in (("l_knee_flex", 0.08), ("r_hip_flex", -0.06), ("l_shoulder_abd", 0.1)):
+        delta[6 + body.dof_index(name)] = value
+    return p0, p0.retract(delta)
+
+
+def model_plates(body, poses, cams, noise=0.0):
+    """Textured images of the tracker's own body at the given poses, and their masks."""
+    S = body.n_segments
+    sb = synth.SynthBody(list(body.segment_names), ["shirt"] * S, body.primitives(),
+                         np.stack([body.seg2world(p) for p in poses]))
+    rng = np.random.default_rng(5)
+    bgs = [synth._background(rng, *cams[0].image_size, 0) for _ in cams]
+    scene = synth.Scene(sb, cams, bgs, noise=noise)
+    out = []
+    for f in range(len(poses)):
+        frame = []
+        for c in range(len(cams)):
+            image, label = scene.render_frame(f, c)
+            frame.append((plates.to_gray_float(image), label >= 0))
+        out.append(frame)
+    return out
+
+
+def prepared(frame, settings, with_masks):
+    return [D.prepare_images(g, settings.levels, settings.smooth_sigma,
+                             m if with_masks else None) for g, m in frame]
+
+
+@pytest.fixture(scope="module")
+def body():
+    return make_body("full")
+
+
+@pytest.mark.parametrize("n_views", [1, 3])
+def test_step_recovers_a_known_motion(body, n_views):
+    p0, p1 = two_poses(body)
+    cams = ring_of_cameras(3, 3.5, 1.3, [0, 0, 0.9], SIZE, 350)[:n_views]
+    frames = model_plates(body, [p0, p1], cams, noise=1.0)
+    settings = D.Settings(anchor_weight=0.0, velocity=0.0)
+    tracker = D.DifferentialTracker(body, True, settings)
+    state = D.State(np.stack([p0.root] * n_views), p0.angles.copy(), cams)
+    new, report = tracker.step(state, prepared(frames[0], settings, True),
+                               prepared(frames[1], settings, True))
+    moved = np.linalg.norm(body.joints(p1) - body.joints(p0), axis=1).mean()
+    error = np.linalg.norm(body.joints(p1) - body.joints(new.pose()), axis=1).mean()
+    assert moved > 0.02
+    assert error < (0.004 if n_views == 3 else 0.012)
+    assert np.all(report.iou > 0.95) and np.all(report.residual < 5.0)
+
+
+def test_views_in_parallel_give_the_same_step(body):
+    p0, p1 = two_poses(body)
+    cams = ring_of_cameras(3, 3.5, 1.3, [0, 0, 0.9], SIZE, 350)
+    frames = model_plates(body, [p0, p1], cams, noise=1.0)
+    out = []
+    for threads in (1, 2):
+        settings = D.Settings(threads=threads)
+        tracker = D.DifferentialTracker(body, True, settings)
+        state = D.State(np.stack([p0.root] * 3), p0.angles.copy(), cams)
+        new, report = tracker.step(state, prepared(frames[0], settings, True),
+                                   prepared(frames[1], settings, True))
+        out.append((new, report))
+    (a, ra), (b, rb) = out
+    assert np.array_equal(a.angles, b.angles) and np.array_equal(a.roots, b.roots)
+    assert np.array_equal(ra.residual, rb.residual) and ra.cost == rb.cost
+
+
+def _calibrated_frames(body, poses, views):
+    """A tracker over ``views`` calibrated cameras, its state at the first pose, and the
+    prepared images of the model plates of the two poses."""
+    cams = ring_of_cameras(views, 3.5, 1.3, [0, 0, 0.9], SIZE, 350)
+    frames = model_plates(body, list(poses), cams, noise=1.0)
+    settings = D.Settings()
+    tracker = D.DifferentialTracker(body, True, settings)
+    state = D.State(np.stack([poses[0].root] * views), poses[0].angles.copy(), cams)
+    return (tracker, state, prepared(frames[0], settings, True),
+            prepared(frames[1], settings, True))
+
+
+def test_stacked_calibrated_system_equals_the_sum_over_views(body):
+    """Calibrated views share the world pose: the one-pass stacked system (all views' points
+    summed per segment) is the per-view systems added up."""
+    tracker, state, ims0, ims1 = _calibrated_frames(body, two_poses(body), 3)
+    renders = tracker.render_views(state)
+    flow = tracker.template_terms(state, ims0, renders)
+    sil = tracker.contour_terms(state, 0)
+    terms = [[("flow", flow[0][c], 1.0), ("silhouette", sil[c], 0.01)] for c in range(3)]
+    rng = np.random.default_rng(5)
+    em = {(1, "flow"): rng.uniform(0, 1, len(flow[0][1]))}
+    moved = tracker.retract(state, np.r_[rng.normal(0, 0.01, 6),
+                                         rng.normal(0, 0.05, body.n_dofs)])
+    kin = body.kinematics(moved.pose(0))
+    normal_equations, cost, accs = tracker._stacked_system(moved, 0, terms, ims1, em, kin)
+    H, g = normal_equations()
+    H_sum, g_sum, cost_sum = 0, 0, 0.0
+    for c in range(3):
+        Hc, gc, cc, accs_c = tracker._view_system(moved, 0, terms, ims1, em, c)
+        H_sum, g_sum, cost_sum = H_sum + Hc, g_sum + gc, cost_sum + cc
+        for key, acc in accs_c.items():
+            assert np.allclose(acc.residual, accs[key].residual)
+            assert np.array_equal(acc.inside, accs[key].inside)
+    assert np.abs(H).max() > 0
+    assert np.allclose(H, H_sum, rtol=1e-9, atol=1e-9 * np.abs(H).max())
+    assert np.allclose(g, g_sum, rtol=1e-9, atol=1e-9 * np.abs(g).max())
+    assert np.isclose(cost, cost_sum, rtol=1e-12)
+
+
+def test_contour_terms_equal_the_contour_of_the_full_render(body):
+    """The contour's points come from the depth image at the contour pixels only: the same
+    pixels, segments and reference points as taking them from a render with every point."""
+    import cv2
+
+    from zoopraxis.core.imaging.render import render
+    p0, _ = two_poses(body)
+    cams = ring_of_cameras(3, 3.5, 1.3, [0, 0, 0.9], SIZE, 350)
+    tracker = D.DifferentialTracker(body, True, D.Settings())
+    state = D.State(np.stack([p0.root] * 3), p0.angles.copy(), cams)
+    for level in range(3):
+        terms = tracker.contour_terms(state, level)
+        for c, term in enumerate(terms):
+            cam = tracker._camera_at(cams[c], level)
+            T = body.seg2world(state.pose(c))
+            rr = render(cam, T, tracker.prims, want=("point",))
+            fg = (rr.label >= 0).astype(np.uint8)
+            vv, uu = np.nonzero(fg & (cv2.erode(fg, np.ones((3, 3), np.uint8)) == 0))
+            if len(vv) > 1500:
+                keep = np.linspace(0, len(vv) - 1, 1500).astype(int)
+                vv, uu = vv[keep], uu[keep]
+            seg = rr.label[vv, uu].astype(np.int64)
+            ref = se3.apply(se3.invert(T)[seg], rr.point[vv, uu].astype(np.float64))
+            order = np.argsort(seg, kind="stable")      # a Term groups its points by segment
+            assert len(seg) > 50
+            np.testing.assert_array_equal(term.segment, seg[order])
+            np.testing.assert_array_equal(term.ref_points, ref[order])
+
+
+def test_contour_pixels_equal_those_of_the_whole_image():
+    import cv2
+    rng = np.random.default_rng(3)
+    kernel = np.ones((3, 3), np.uint8)
+    masks = [np.zeros((40, 50), bool), np.ones((40, 50), bool)]
+    for _ in range(40):
+        m = np.zeros((40, 50), bool)
+        r0, c0 = rng.integers(0, 40), rng.integers(0, 50)
+        m[r0:r0 + rng.integers(1, 30), c0:c0 + rng.integers(1, 30)] = True
+        m &= rng.uniform(size=m.shape) < rng.choice([0.6, 1.0])      # holes, specks
+        masks.append(m)
+    for m in masks:
+        ref = np.nonzero(m & ~(cv2.erode(m.astype(np.uint8), kernel) > 0))
+        got = D._contour_pixels(m)
+        for a, b in zip(got, ref):
+            assert a.dtype == b.dtype
+            np.testing.assert_array_equal(a, b)
+
+
+def test_remembered_poses_and_visibility_are_the_computed_ones(body):
+    """The tracker's memo of segment transforms per pose and of the anchor's visibility per
+    frame answer what computing them afresh gives, and notice a changed pose."""
+    p0, p1 = two_poses(body)
+    cams = ring_of_cameras(3, 3.5, 1.3, [0, 0, 0.9], SIZE, 350)
+    frames = model_plates(body, [p0], cams)
+    settings = D.Settings()
+    tracker = D.DifferentialTracker(body, True, settings)
+    state = D.State(np.stack([p0.root] * 3), p0.angles.copy(), cams)
+    other = D.State(np.stack([p1.root] * 3), p1.angles.copy(), cams)
+    for st in (state, other, state):
+        for c in range(3):
+            T = tracker._seg2world(st, c)
+            assert not T.flags.writeable
+            np.testing.assert_array_equal(T, body.seg2world(st.pose(c)))
+    ims = prepared(frames[0], settings, True)
+    renders = tracker.render_views(state)
+    tracker.set_anchor(state, ims, renders)
+    moved = tracker.retract(state, np.r_[[0.02, 0, 0, 0, 0, 0.2], np.zeros(body.n_dofs)])
+    for st in (state, moved, state, moved):
+        for level in range(settings.levels):
+            for term in tracker.anchor_terms[level]:
+                c = term.view
+                cam = tracker._camera_at(st.cameras[c], level)
+                X = se3.apply(body.seg2world(st.pose(c))[term.segment], term.ref_points)
+                uv = cam.project(X) * 2 ** level
+                u, v = np.rint(uv).astype(int).T
+                h, w = renders[c].label.shape
+                inside = (u >= 0) & (u < w) & (v >= 0) & (v < h)
+                expected = np.zeros(len(u), bool)
+                expected[inside] = renders[c].label[v[inside], u[inside]] \
+                    == term.segment[inside]
+                got = tracker._visible(term, st, level, renders)
+                np.testing.assert_array_equal(got, expected)
+                got[:] = False          # the caller's copy: the memo keeps its own
+                assert expected.sum() > 0.3 * len(u)
+
+
+def test_contour_once_per_frame_tracks_like_per_level(body):
+    """``contour_per_level=False`` renders the contour once (finest level, start pose) and thins
+    it for the coarser levels: the step still recovers the motion."""
+    p0, p1 = two_poses(body)
+    cams = ring_of_cameras(3, 3.5, 1.3, [0, 0, 0.9], SIZE, 350)
+    frames = model_plates(body, [p0, p1], cams, noise=1.0)
+    settings = D.Settings(anchor_weight=0.0, velocity=0.0, contour_per_level=False)
+    tracker = D.DifferentialTracker(body, True, settings)
+    state = D.State(np.stack([p0.root] * 3), p0.angles.copy(), cams)
+    ims0, ims1 = prepared(frames[0], settings, True), prepared(frames[1], settings, True)
+    base = tracker.contour_terms(state, 0)
+    coarse = tracker.coarser_contour(base, 2, 0)
+    assert all(abs(len(c) - len(b) / 4) <= 1 for b, c in zip(base, coarse))
+    assert coarse[0].scale == settings.silhouette_scale / 4
+    new, report = tracker.step(state, ims0, ims1)
+    error = np.linalg.norm(body.joints(p1) - body.joints(new.pose()), axis=1).mean()
+    assert error < 0.004 and np.all(report.iou > 0.95)
+
+
+def test_step_respects_joint_limits(body):
+    p0, _ = two_poses(body)
+    p1 = p0.copy()
+    k = body.dof_index("l_knee_flex")
+    p0.angles[k] = 0.02
+    p1.angles[k] = 0.0          # at the limit: the solver must not go past it
+    cams = ring_of_cameras(2, 3.5, 1.3, [0, 0, 0.9], SIZE, 350)
+    frames = model_plates(body, [p0, p1], cams)
+    settings = D.Settings(anchor_weight=0.0, velocity=0.0)
+    tracker = D.DifferentialTracker(body, True, settings)
+    state = D.State(np.stack([p0.root] * 2), p0.angles.copy(), cams)
+    new, _ = tracker.step(state, prepared(frames[0], settings, False),
+                          prepared(frames[1], settings, False))
+    assert np.all(new.angles >= body.lower - 1e-12) and np.all(new.angles <= body.upper + 1e-12)
+
+
+def test_uncalibrated_views_share_angles(body):
+    """Bregler & Malik eq. 28: one scaled-orthographic pose per view, shared joint angles.
+
+    A front and a side view; the motion is one both views can see in their image planes
+    (depth is invisible under orthographic projection).
+    """
+    p0, _ = two_poses(body)
+    delta = np.zeros(body.n_params)
+    delta[2] = 0.02                                              # rise
+    for name, value in (("l_knee_flex", 0.1), ("r_hip_flex", -0.08), ("l_shoulder_flex", 0.12)):
+        delta[6 + body.dof_index(name)] = value
+    p1 = p0.retract(delta)
+    cams, cam_from_world = [], []
+    for k, eye in enumerate(([0.5, -6.0, 1.2], [6.0, 0.8, 1.2])):
+        R, t = look_at(eye, [0, 0, 0.9])
+        cams.append(ScaledOrthoCamera(f"v{k}", SIZE, s=90.0))
+        cam_from_world.append(se3.transform(R, t))
+
+    def in_view(c, pose):
+        return pose.__class__(cam_from_world[c] @ pose.root, pose.angles)
+
+    frames = [[], []]
+    for c in range(2):
+        seg = np.stack([body.seg2world(in_view(c, p)) for p in (p0, p1)])
+        sb = synth.SynthBody(list(body.segment_names), ["shirt"] * body.n_segments,
+                             body.primitives(), seg)
+        bg = synth._background(np.random.default_rng(c), *SIZE, 0)
+        scene = synth.Scene(sb, [cams[c]], [bg])
+        for f in range(2):
+            image, label = scene.render_frame(f, 0)
+            frames[f].append((plates.to_gray_float(image), label >= 0))
+    settings = D.Settings(anchor_weight=0.0, velocity=0.0)
+    tracker = D.DifferentialTracker(body, False, settings)
+    state = D.State(np.stack([in_view(c, p0).root for c in range(2)]), p0.angles.copy(), cams)
+    new, _ = tracker.step(state, prepared(frames[0], settings, True),
+                          prepared(frames[1], settings, True))
+    for c in range(2):
+        true_uv = cams[c].project(body.joints(in_view(c, p1)))
+        start_uv = cams[c].project(body.joints(in_view(c, p0)))
+        got_uv = new.cameras[c].project(body.joints(new.pose(c)))
+        assert np.abs(got_uv - true_uv).mean() < 0.3 * np.abs(start_uv - true_uv).mean()
+    # legs carry many pixels; the thin arm is held back more by the prior towards stillness
+    for name, tol in (("l_knee_flex", 0.03), ("r_hip_flex", 0.03), ("l_shoulder_flex", 0.05)):
+        k = body.dof_index(name)
+        assert abs(new.angles[k] - p1.angles[k]) < tol, name
+
+
+def test_prediction_extrapolates_motion(body):
+    tracker = D.DifferentialTracker(body, True, D.Settings(velocity=0.5))
+    p0, p1 = two_poses(body)
+    cams = ring_of_cameras(1, 3.5, 1.3, [0, 0, 0.9], SIZE, 350)
+    s0 = D.State(p0.root[None], p0.angles, cams)
+    s1 = D.State(p1.root[None], p1.angles, cams)
+    pred = tracker.predict(s1, s0)
+    expected = body.clamp(p1.angles + 0.5 * (p1.angles - p0.angles))
+    assert np.allclose(pred.angles, expected)
+
+
+def test_median_equals_numpy():
+    rng = np.random.default_rng(3)
+    for n in range(1, 40):
+        x = rng.normal(size=n) * 10.0 ** rng.uniform(-8, 8)
+        for v in (x, np.round(x, 1), np.abs(x)):
+            assert D._median(v) == np.median(v)
+    assert np.isnan(D._median(np.array([1.0, np.nan, 2.0])))
+
+
+@pytest.mark.parametrize("calibrated", [True, False])
+def test_difference_and_parameter_groups_equal_the_plain_computation(body, calibrated):
+    """_difference takes the log of a root shared by calibrated views once, and the
+    parameter groups are made once per number of views: the same values as view by view."""
+    rng = np.random.default_rng(4)
+    tracker = D.DifferentialTracker(body, calibrated)
+    V = 3
+    cams = [ScaledOrthoCamera("o", SIZE, s=80.0 + c) for c in range(V)]
+
+    def state():
+        roots = np.stack([se3.exp_se3(rng.normal(0, 0.3, 6)) for _ in range(V)])
+        if calibrated:
+            roots[:] = roots[0]
+        return D.State(roots, rng.normal(0, 0.2, body.n_dofs), list(cams))
+
+    a, b = state(), state()
+    roots_cols, scale_cols, angle_cols, P = tracker.layout(V)
+    ref = np.zeros(P)
+    for c, cols in enumerate(roots_cols):
+        ref[cols] = se3.log_se3(a.roots[c] @ se3.invert(b.roots[c]))
+        if scale_cols[c] is not None:
+            ref[scale_cols[c]] = np.log(a.cameras[c].s / b.cameras[c].s)
+    ref[angle_cols] = a.angles - b.angles
+    assert np.array_equal(tracker._difference(a, b), ref)
+    fresh = tracker._make_param_groups(V)
+    for _ in range(2):
+        groups = tracker._param_groups(V)
+        assert len(groups) == len(fresh)
+        assert all(np.array_equal(g, f) for g, f in zip(groups, fresh))
+
+
+def test_lazy_system_equals_the_eager_one(body):
+    """A Levenberg-Marquardt candidate is judged on its cost alone; its normal equations,
+    asked for afterwards, are the ones an eager system gives (to the bit)."""
+    tracker, state, ims0, ims1 = _calibrated_frames(body, two_poses(body), 2)
+    flow = tracker.template_terms(state, ims0, tracker.render_views(state))
+    terms = [[("flow", flow[0][c], 1.0)] for c in range(2)]
+    moved = tracker.retract(state, np.r_[np.zeros(6), np.full(body.n_dofs, 0.05)])
+    H, g, cost, accs = tracker._system(moved, 0, terms, ims1, {})
+    normal_equations, lazy_cost, lazy_accs = tracker._system(moved, 0, terms, ims1, {},
+                                                             lazy=True)
+    assert lazy_cost == cost and lazy_accs.keys() == accs.keys()
+    H2, g2 = normal_equations()
+    assert np.abs(H).max() > 0
+    assert np.array_equal(H, H2) and np.array_equal(g, g2)
+
+
+def test_em_reweighted_system_equals_a_fresh_one(body):
+    """The EM step's weights change the normal equations, not the costs: a lazy system asked
+    for its equations under new EM weights gives, to the bit, what a system made afresh with
+    them gives, and the same cost."""
+    tracker, state, ims0, ims1 = _calibrated_frames(body, two_poses(body), 2)
+    flow = tracker.template_terms(state, ims0, tracker.render_views(state))
+    terms = [[("flow", flow[0][c], 1.0)] for c in range(2)]
+    moved = tracker.retract(state, np.r_[np.zeros(6), np.full(body.n_dofs, 0.05)])
+    normal_equations, cost, accs = tracker._system(moved, 0, terms, ims1, {}, lazy=True)
+    em = tracker._em_weights(terms, ims1, accs, 0)
+    assert em and all(np.ptp(w) > 0.1 for w in em.values())    # the weights do change
+    H2, g2 = normal_equations(em)
+    H, g, cost_em, _ = tracker._system(moved, 0, terms, ims1, em)
+    assert cost_em == cost
+    assert np.array_equal(H, H2) and np.array_equal(g, g2)
+    H0, _, _, _ = tracker._system(moved, 0, terms, ims1, {})
+    assert not np.allclose(H0, H)

@@ -1,0 +1,223 @@
+"""Limb recovery: the silhouette search finds a limb the image-motion step cannot reach."""
+
+import numpy as np
+import pytest
+
+from zoopraxis.core.trackers import differential as D
+from zoopraxis.core.geometry import se3
+from zoopraxis.core.imaging.background import signed_distance
+from zoopraxis.core.body.body import make_body
+from zoopraxis.core.geometry.camera import ring_of_cameras
+from zoopraxis.core.trackers.recover import LimbSearch, interior_points, limb_groups
+from zoopraxis.core.imaging.render import render
+
+from tests.core.trackers.test_differential import model_plates, prepared
+
+SIZE = (320, 240)
+
+
+@pytest.fixture(scope="module")
+def body():
+    return make_body("full")
+
+
+@pytest.fixture(scope="module")
+def cams():
+    return ring_of_cameras(3, 3.5, 1.3, [0, 0, 0.9], SIZE, 350)
+
+
+def kicked(body):
+    """A standing pose and the same pose with the left leg kicked forward, knee bent."""
+    p0 = body.rest_pose(se3.transform(p=[0, 0, 0.95]))
+    p1 = p0.copy()
+    p1.angles[body.dof_index("l_hip_flex")] = 1.1
+    p1.angles[body.dof_index("l_knee_flex")] = 0.9
+    p1.angles = body.clamp(p1.angles)
+    return p0, p1
+
+
+def silhouettes(body, pose, cams):
+    out = []
+    for cam in cams:
+        rr = render(cam, body.seg2world(pose), body.primitives(), want=())
+        out.append(rr.label)
+    return out
+
+
+def test_limb_groups_cover_the_limbs(body):
+    groups = {g.name: g for g in limb_groups(body)}
+    assert set(groups) == {"left leg", "right leg", "left arm", "right arm"}
+    leg = groups["left leg"]
+    assert {body.dof_names[i] for i in leg.dofs} == {
+        "l_hip_flex", "l_hip_abd", "l_hip_rot", "l_knee_flex", "l_ankle_flex", "l_ankle_inv"}
+    assert {body.segment_names[k] for k in leg.segments} == {"l_thigh", "l_shank", "l_foot"}
+    arm = groups["right arm"]
+    assert {body.segment_names[k] for k in arm.segments} == {"r_upper_arm", "r_forearm"}
+    # the muybridge template has no feet: its legs still form groups
+    m = make_body("muybridge")
+    assert len(limb_groups(m)) == 4
+
+
+def test_interior_points_lie_inside_their_primitives(body):
+    prims = body.primitives()
+    seg, pts = interior_points(prims, n=20)
+    assert len(seg) == 20 * len(prims)
+    # Every point projects inside the model's own support map, on its own segment's label
+    # or one in front of it.
+    pose = body.rest_pose(se3.transform(p=[0, 0, 0.95]))
+    cam = ring_of_cameras(1, 3.5, 1.0, [0, 0, 0.9], SIZE, 350)[0]
+    T = body.seg2world(pose)
+    X = np.einsum("mij,mj->mi", T[seg, :3, :3], pts) + T[seg, :3, 3]
+    uv = np.rint(cam.project(X)).astype(int)
+    label = render(cam, T, prims, want=()).label
+    assert (label[uv[:, 1], uv[:, 0]] >= 0).mean() > 0.99
+
+
+def test_search_finds_a_kicked_leg(body, cams):
+    p0, p1 = kicked(body)
+    labels1 = silhouettes(body, p1, cams)
+    sdfs = [signed_distance(lab >= 0) for lab in labels1]
+    state = D.State(np.stack([p0.root] * 3), p0.angles.copy(), list(cams))
+    search = LimbSearch(body, seed=3)
+    angles, moved = search.search(state, sdfs, silhouettes(body, p0, cams))
+    assert [name for name, _ in moved] == ["left leg"]
+    knee_true = body.joints(p1)[[body_joint(body, "l_knee"), body_joint(body, "l_ankle")]]
+    knee_found = body.joints(D.Pose(p0.root, angles))[[body_joint(body, "l_knee"),
+                                                     body_joint(body, "l_ankle")]]
+    knee_start = body.joints(p0)[[body_joint(body, "l_knee"), body_joint(body, "l_ankle")]]
+    err = np.linalg.norm(knee_found - knee_true, axis=1).max()
+    assert np.linalg.norm(knee_start - knee_true, axis=1).max() > 0.3
+    assert err < 0.08
+    # The other limbs are left alone.
+    others = [i for i in range(body.n_dofs) if not body.dof_names[i].startswith("l_")]
+    assert np.allclose(angles[others], p0.angles[others])
+
+
+def test_search_leaves_a_fitting_body_alone(body, cams):
+    p0, _ = kicked(body)
+    labels = silhouettes(body, p0, cams)
+    state = D.State(np.stack([p0.root] * 3), p0.angles.copy(), list(cams))
+    angles, moved = LimbSearch(body).search(state, [signed_distance(lab >= 0) for lab in labels],
+                                            labels)
+    assert moved == []
+    assert np.array_equal(angles, p0.angles)
+
+
+def body_joint(body, name):
+    from zoopraxis.core.body.joints import JOINT_INDEX
+
+    return JOINT_INDEX[name]
+
+
+@pytest.mark.parametrize("search", [False, True])
+def test_step_recovers_a_kick_only_with_the_search(body, cams, search):
+    p0, p1 = kicked(body)
+    settings = D.Settings(limb_search=search)
+    frames = model_plates(body, [p0, p1], cams)
+    ims0 = prepared(frames[0], settings, True)
+    ims1 = prepared(frames[1], settings, True)
+    tracker = D.DifferentialTracker(body, True, settings)
+    state0 = D.State(np.stack([p0.root] * 3), p0.angles.copy(), list(cams))
+    state1, report = tracker.step(state0, ims0, ims1)
+    err = 1000 * np.linalg.norm(body.joints(state1.pose()) - body.joints(p1), axis=1).max()
+    if search:
+        assert report.recovered == ["left leg"]
+        assert err < 40
+    else:
+        # the kick is beyond the image-motion step's reach: this is what the search is for
+        assert report.recovered == []
+        assert err > 150
+
+
+def reference_score(search, roots, angles, segments, cameras, sdfs, rest, unexplained=None):
+    """LimbSearch.score the plain way: the whole body posed, the limb's points picked."""
+    from zoopraxis.core.trackers import recover as rc
+
+    sel = np.isin(search.point_segment, segments)
+    seg, pts = search.point_segment[sel], search.points[sel]
+    total, used = np.zeros(len(angles)), 0
+    for c, cam in enumerate(cameras):
+        if sdfs[c] is None:
+            continue
+        T = search.body.seg2world(np.repeat(roots[c][None], len(angles), axis=0), angles)[:, seg]
+        X = np.einsum("nmij,mj->nmi", T[..., :3, :3], pts) + T[..., :3, 3]
+        uv = cam.project(X.reshape(-1, 3)).reshape(len(angles), -1, 2)
+        h, w = sdfs[c].shape
+        u = np.clip(np.rint(uv[..., 0]), 0, w - 1).astype(int)
+        v = np.clip(np.rint(uv[..., 1]), 0, h - 1).astype(int)
+        off = (uv[..., 0] < 0) | (uv[..., 0] > w - 1) | (uv[..., 1] < 0) | (uv[..., 1] > h - 1)
+        s = np.where(off, -1.0, np.clip(-sdfs[c][v, u] / rc.SDF_SCALE, -1.0, 1.0))
+        if rest is not None and rest[c] is not None:
+            s = np.where((s > 0) & rest[c][v, u], rc.SHARED_CREDIT * s, s)
+        if unexplained is not None and unexplained[c] is not None:
+            s = s + rc.UNEXPLAINED_BONUS * (unexplained[c][v, u] & ~off)
+        total += s.mean(axis=1)
+        used += 1
+    return total / max(used, 1)
+
+
+def test_score_equals_the_whole_body_reference(body, cams, rng):
+    from zoopraxis.core.trackers.recover import _rest_of_body, unexplained_foreground
+
+    p0, p1 = kicked(body)
+    labels0 = silhouettes(body, p0, cams)
+    sdfs = [signed_distance(lab >= 0).astype(np.float32) for lab in silhouettes(body, p1, cams)]
+    sdfs[1] = None
+    unexplained = [None if d is None else unexplained_foreground(d < 0, lab)
+                   for d, lab in zip(sdfs, labels0)]
+    assert any(u is not None and u.any() for u in unexplained)
+    roots = np.stack([p0.root] * 3)
+    moved = roots.copy()
+    moved[2] = se3.exp_se3([0.05, 0, 0, 0, 0, 0.2]) @ roots[2]
+    search = LimbSearch(body)
+    for group in limb_groups(body):
+        angles = np.repeat(p0.angles[None], 30, axis=0)
+        angles[:, group.dofs] += rng.normal(size=(30, len(group.dofs))) * 0.6
+        angles = body.clamp(angles)
+        for segs in [group.segments] + [s for _, s in group.stages]:
+            for rs in (roots, moved):
+                rest = _rest_of_body(labels0, group)
+                plain = [r.table[r.labels + 1] for r in rest]     # as boolean images
+                for args in ((rest, unexplained), (plain, None), (None, unexplained)):
+                    got = search.score(rs, angles, segs, cams, sdfs, *args)
+                    want = reference_score(search, rs, angles, segs, cams, sdfs, *args)
+                    assert np.allclose(got, want, rtol=0, atol=1e-9)
+
+
+def test_fit_after_a_search_that_moved_nothing_reuses_its_scores(body, cams, monkeypatch):
+    """A search that moves no limb has scored every limb at the pose; the fit that follows
+    (same pose, silhouettes and support maps) gives those scores without scoring again, and
+    they are the scores a fresh fit gives, to the bit. A search that moves a limb, or a fit
+    asked about another pose, scores afresh."""
+    p0, p1 = kicked(body)
+    labels = silhouettes(body, p0, cams)
+    # foreground thickly larger than the model: unexplained pixels, which the legs' search
+    # scores credit and the fit's do not
+    import cv2
+
+    grown = [cv2.dilate((lab >= 0).astype(np.uint8), np.ones((17, 17), np.uint8)) > 0
+             for lab in labels]
+    sdfs = [signed_distance(g) for g in grown]
+    state = D.State(np.stack([p0.root] * 3), p0.angles.copy(), list(cams))
+    fresh = LimbSearch(body).fit(state, sdfs, labels)
+    search = LimbSearch(body)
+    angles, moved = search.search(state, sdfs, labels)
+    assert moved == []
+    # the search's own leg scores count the unexplained pixels (a few points fall there)
+    assert search.last_scores["left leg"] != fresh["left leg"]
+    calls = []
+    score = search.score
+    monkeypatch.setattr(search, "score", lambda *a, **k: calls.append(1) or score(*a, **k))
+    assert search.fit(state, sdfs, labels) == fresh
+    assert calls == []
+    other = state.copy()
+    other.angles = p1.angles.copy()
+    search.fit(other, sdfs, labels)
+    assert len(calls) == len(search.groups)
+    # a search that moves a limb leaves nothing to reuse
+    kicked_sdfs = [signed_distance(lab >= 0) for lab in silhouettes(body, p1, cams)]
+    _, moved = search.search(state, kicked_sdfs, labels)
+    assert moved
+    calls.clear()
+    search.fit(state, kicked_sdfs, labels)
+    assert len(calls) == len(search.groups)
