@@ -500,6 +500,7 @@ def finetune(plates, anchors, cameras, *, result=None, init=None, frames=None, o
         No calibration, a view without a camera, bad anchors or frames (as :func:`track.track`).
     """
     from . import track as T
+    from .driver import FrameSource
     from ..trackers.differential import Settings
     from ..initialize.fit import initialize
 
@@ -566,7 +567,7 @@ def finetune(plates, anchors, cameras, *, result=None, init=None, frames=None, o
     factors = {v: min(1.0, max_size / max(plates[v].image_size)) for v in views}
     work = [cameras[v].scaled(factors[v], sampling="resize") if factors[v] != 1.0 else cameras[v]
             for v in views]
-    source = T.FrameSource(plates, views, offsets, factors)
+    source = FrameSource(plates, views, offsets, factors)
     index = {int(f): i for i, f in enumerate(first.frames)}
     pose_of = {f: Pose(first.roots[i], first.angles[i]) for f, i in index.items()}
     picked[:] = _sample_frames(first, samples)
