@@ -90,17 +90,38 @@ def tracked_backgrounds(tracker, source, views, frames, states, use_bg):
         Per view; None where the view's background is not used.
     """
     sample = [int(f) for f in sample_frames(frames) if int(f) in states]
-    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (9, 9))
-    per_view = [[] for _ in views]
-    masks = [[] for _ in views]
-    for f in sample:
-        renders = tracker.render_views(states[f], want=())
-        for c, img in enumerate(source.colour(f)):
+    return backgrounds_without_body(
+        source, sample,
+        lambda f: [r.label >= 0 for r in tracker.render_views(states[f], want=())],
+        [u and len(sample) >= 5 for u in use_bg])
+
+
+def backgrounds_without_body(source, frames, silhouettes, wanted, margin=9):
+    """Each view's background from ``frames``, with where the body is in each frame kept out.
+
+    Parameters
+    ----------
+    source : FrameSource
+    frames : list of int
+    silhouettes : callable(frame) -> list of array of bool
+        The body's silhouette in each view at a frame (dilated here by ``margin`` pixels).
+    wanted : list of bool
+        Per view: estimate it (else None).
+
+    Returns
+    -------
+    list of BackgroundModel or None
+    """
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (margin, margin))
+    per_view = [[] for _ in wanted]
+    masks = [[] for _ in wanted]
+    for f in frames:
+        for c, (img, body) in enumerate(zip(source.colour(f), silhouettes(f))):
             per_view[c].append(img)
-            masks[c].append(cv2.dilate((renders[c].label >= 0).astype(np.uint8), kernel) > 0)
+            masks[c].append(cv2.dilate(body.astype(np.uint8), kernel) > 0)
     return list(thread_pool("views", 2).map(
         lambda c: estimate_background(per_view[c], masks=np.stack(masks[c]))
-        if use_bg[c] and len(sample) >= 5 else None, range(len(views))))
+        if wanted[c] else None, range(len(wanted))))
 
 
 def remeasure(tracker, source, states, reports, anchor_frames, backgrounds, use_bg, limbs):
