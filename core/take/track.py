@@ -13,7 +13,6 @@ results are reported in the plates' own pixels.
 """
 
 import threading
-from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -24,7 +23,7 @@ from ..body.body import Pose
 from ..geometry.camera import ScaledOrthoCamera
 from ..trackers.differential import DifferentialTracker, Settings, State, prepare_images, thread_pool
 from ..errors import ZoopraxisError
-from ..initialize.fit import CAMERA_TILT_DEG
+from ..initialize.options import InitOptions
 from ..files.markers import check_markers
 from ..imaging.plates import to_gray_float
 from ..trackers.recover import unexplained_foreground, unexplained_share
@@ -62,29 +61,6 @@ UNEXPLAINED_UNCERTAIN = 0.25
 # seam: a joint acceleration of 50 mm per frame^2, where the walk's own reaches 22.
 BLEND_REACH = 8
 POOR_PASS = 0.5
-
-
-@dataclass
-class Initial:
-    """Poses the tracker starts from: what :func:`initialize.initialize` returns.
-
-    Attributes
-    ----------
-    body : BodyModel
-    poses : dict of int to Pose
-        Pose per anchor frame (world; body-centred when uncalibrated).
-    cameras : dict of str to camera
-        Calibrated: the plates' cameras. Uncalibrated: fitted scaled-orthographic cameras.
-    view_cameras : dict of int to dict of str to camera, optional
-        Uncalibrated: the fitted camera of every view at every anchor frame.
-    warnings : list of str
-    """
-
-    body: object
-    poses: dict
-    cameras: dict
-    view_cameras: dict = None
-    warnings: list = field(default_factory=list)
 
 
 class FrameSource:
@@ -748,10 +724,9 @@ def _tracking_view(cam, body2world, near):
                                        c=cam.c, kappa=cam.kappa)
 
 
-def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template="full",
-          settings=None, init=None, max_size=960, progress=None, cancel=None, log=None,
-          workers=1, blend_reach=BLEND_REACH, flips=None, camera_tilt=CAMERA_TILT_DEG,
-          pose_prior="default", dims=None, perspective=False):
+def track(plates, anchors, cameras=None, *, frames=None, offsets=None, settings=None,
+          init=None, max_size=960, progress=None, cancel=None, log=None, workers=1,
+          blend_reach=BLEND_REACH, init_options=None):
     """Track a take with the differential tracker.
 
     Parameters
@@ -765,8 +740,9 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
         Take frames to track (default: all frames the plates share).
     offsets : dict of str to int, optional
         Per-view plate frame offset (take frame f is plate frame f + offset).
-    init : Initial, optional
-        Starting poses; by default fitted to the markers with :func:`initialize.initialize`.
+    init : InitResult, optional
+        Starting poses; by default fitted to the markers (:func:`initialize.run.initialize_take`
+        with ``init_options``).
     progress : callable(done, total), optional
     cancel : callable() -> bool, optional
         Polled once a frame; on cancel the frames already tracked are returned.
@@ -777,21 +753,10 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
     blend_reach : int or None
         Between two anchors, how many frames past the middle each pass tracks at first
         (:data:`BLEND_REACH`); None tracks both passes from anchor to anchor.
-    flips : dict of int to list of str, optional
-        Body parts to turn to their other depth at anchor frames clicked in one view
-        (:func:`initialize.initialize`), when ``init`` is not given.
-    camera_tilt : (float, float) or None
-        Uncalibrated, when ``init`` is not given: how far the camera of an anchor frame
-        clicked in one view looks down at the subject, give or take how much (degrees;
-        :func:`initialize.initialize`).
-    pose_prior : PosePrior, "default", path or None
-        When ``init`` is not given: the pose prior of anchor frames clicked in one view
-        (:func:`initialize.initialize`).
-    dims : dict, optional
-        When ``init`` is not given: the performer's body lengths, kept instead of fitted.
-    perspective : bool
-        Uncalibrated, when ``init`` is not given: fit each view's perspective (views near the
-        body; :func:`initialize.initialize`) and track through it.
+    init_options : InitOptions, optional
+        How to initialize from the markers when ``init`` is not given (template, flips, pose
+        prior, body lengths, camera tilt, perspective); default ``InitOptions()``. The
+        perspective fitted to uncalibrated views is tracked through.
 
     Returns
     -------
@@ -803,19 +768,10 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
     settings = settings or Settings()
 
     if init is None:
-        from ..initialize.fit import initialize
+        from ..initialize.run import initialize_take
 
-        res = initialize(inside, {v: cameras[v] if calibrated else tuple(plates[v].image_size)
-                                  for v in views},
-                         template=template, calibrated=calibrated, views=views, flips=flips,
-                         camera_tilt=camera_tilt, pose_prior=pose_prior, dims=dims,
-                         fit_dims=not dims, perspective=perspective)
-        for note in res.flip_notes() + ([res.distance_note()] if perspective else []):
-            log(note)
-        for note in res.notes:
-            log(f"note: {note}")
-        init = Initial(res.body, res.poses, res.cameras, getattr(res, "view_cameras", None),
-                       list(getattr(res, "warnings", [])))
+        init = initialize_take(inside, views, plates, cameras, init_options or InitOptions(),
+                               log)
     for w in init.warnings:
         log(f"warning: {w}")
     if len(views) == 1:

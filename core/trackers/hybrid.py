@@ -53,7 +53,7 @@ from .image_motion import accumulate
 from ..priors.motion_prior import SmoothMotionPrior, WalkingPrior, smooth_sigmas
 from .particle import ParticleFilter
 from ..imaging.plates import to_gray_float
-from ..take.track import (BLEND_REACH, Cancelled, FrameSource, Initial, blend_report, blend_states,
+from ..take.track import (BLEND_REACH, Cancelled, FrameSource, blend_report, blend_states,
                     blend_weights, check_take, extend_passes, make_result, plan_passes,
                     remeasure, silhouette_measures, take_backgrounds, tracked_backgrounds)
 
@@ -223,10 +223,9 @@ def _worse(a, b):
 
 
 def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, seed=2345,
-          frames=None, offsets=None, template="full", max_size=960, progress=None, cancel=None,
-          log=None, init=None, settings=None, prior="smooth", recentre=RECENTRE,
-          prior_scale=None, layers=None, silhouette=None, blend_reach=BLEND_REACH, flips=None,
-          pose_prior="default", dims=None):
+          frames=None, offsets=None, max_size=960, progress=None, cancel=None, log=None,
+          init=None, settings=None, prior="smooth", recentre=RECENTRE, prior_scale=None,
+          layers=None, silhouette=None, blend_reach=BLEND_REACH, init_options=None):
     """Track a take with the particle filter, alone or as the coarse stage of the hybrid.
 
     Parameters
@@ -245,16 +244,15 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
         Take frames to track (default: all frames the plates share).
     offsets : dict of str to int, optional
         Per-view plate frame offset (take frame f is plate frame f + offset).
-    template : str
-        Body template of the initialization from the markers.
     max_size : int
         Longest side of the working images, pixels.
     progress : callable(done, total), optional
     cancel : callable() -> bool, optional
         Polled once a frame; on cancel the frames already tracked are returned.
     log : callable(str), optional
-    init : track.Initial, optional
-        Starting poses; by default fitted to the markers with :func:`initialize.initialize`.
+    init : InitResult, optional
+        Starting poses; by default fitted to the markers (:func:`initialize.run.initialize_take`
+        with ``init_options``).
     settings : differential.Settings, optional
         The refinement's settings (hybrid) and the image preparation's.
     prior : {"smooth", "walk"}
@@ -276,11 +274,10 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
     blend_reach : int or None
         Between two anchors, how many frames past the middle each pass tracks at first
         (:data:`track.BLEND_REACH`); None tracks both passes from anchor to anchor.
-    flips, pose_prior : optional
-        When ``init`` is not given, for anchor frames clicked in one view: the body parts
-        turned to their other depth and the pose prior (:func:`initialize.initialize`).
-    dims : dict, optional
-        When ``init`` is not given: the performer's body lengths, kept instead of fitted.
+    init_options : InitOptions, optional
+        How to initialize from the markers when ``init`` is not given; default
+        ``InitOptions()`` (calibrated views: the camera tilt does not apply, perspective is
+        refused).
 
     Returns
     -------
@@ -325,14 +322,11 @@ def track(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, se
         settings = dataclasses.replace(settings, limb_search=False)
 
     if init is None:
-        from ..initialize.fit import initialize
+        from ..initialize.options import InitOptions
+        from ..initialize.run import initialize_take
 
-        res = initialize(inside, {v: cameras[v] for v in views}, template=template,
-                         calibrated=True, views=views, flips=flips, pose_prior=pose_prior,
-                         dims=dims, fit_dims=not dims)
-        for note in res.flip_notes():
-            log(note)
-        init = Initial(res.body, res.poses, res.cameras, None, list(getattr(res, "warnings", [])))
+        init = initialize_take(inside, views, plates, cameras, init_options or InitOptions(),
+                               log)
     for w in init.warnings:
         log(f"warning: {w}")
     body = init.body
