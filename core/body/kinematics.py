@@ -28,6 +28,7 @@ ANGLE_PRIOR_DEG = {
     "ankle_flex": (0, 15), "ankle_inv": (0, 8),
 }
 
+
 class Kinematics:
     """Standard joints of a template and their derivatives, batched over frames.
 

@@ -193,7 +193,3 @@ def _init_from_json(data, path):
                                        dict(data.get("ambiguous_parts", {})).items()},
                       flipped={int(f): list(p) for f, p in dict(data.get("flipped", {})).items()},
                       notes=[str(n) for n in data.get("notes", [])])
-
-
-# ---------------------------------------------------------------------------------------------
-# Initialization

@@ -3,6 +3,7 @@ least-squares similarity (Kabsch / Umeyama) and the Procrustes-aligned joint err
 
 import numpy as np
 
+
 def triangulate(cameras, uv):
     """Triangulate points clicked in several calibrated views (linear DLT, then no refinement).
 

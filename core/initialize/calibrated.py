@@ -10,6 +10,7 @@ from .fit import _Fit
 from .problem import DIMS_RANGE, _fit, _State
 from .starts import _TORSO, _fit_3d, _fit_limbs_3d, _image_scale, _rot_z
 
+
 class _CalibratedFit(_Fit):
     """Calibrated views: one world pose per anchor frame."""
 

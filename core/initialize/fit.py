@@ -23,6 +23,7 @@ OUTLIER_RATIO = 5.0
 PRIOR_REFITS = 4
 PRIOR_MARGIN = 6.0
 
+
 class _Fit:
     """Shared driver: starting points per anchor, the joint problem, checks of the clicks."""
 

@@ -42,6 +42,7 @@ _AMBIGUOUS_M = 0.10     # ... and it is a different pose if some joint moves thi
 _MIN_FLIP_M = 0.05
 _EXPLORE_NFEV = 30         # evaluations of a short fit that ranks a mirrored limb
 
+
 def flip_part(name):
     """A body part's name as ``FLIP_PARTS`` spell it ("the Left-Leg" -> "left leg"), or None."""
     text = " ".join(str(name).lower().replace("-", " ").replace("_", " ").split())

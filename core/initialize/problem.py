@@ -60,8 +60,6 @@ _DENSE_LIMIT = 400_000
 # variances per nat (1: the posterior of clicks with CLICK_SIGMA_PX noise).
 PRIOR_WEIGHT = 1.0
 
-# The joint problem
-# ---------------------------------------------------------------------------------------------
 
 @dataclass
 class _State:
@@ -526,6 +524,3 @@ def _fit(kin, obs, weights, state, **options):
     problem = _Problem(kin, obs, weights, state, **options)
     fitted, cost = problem.solve(max_nfev=max_nfev)
     return fitted, cost, problem
-
-
-# ---------------------------------------------------------------------------------------------

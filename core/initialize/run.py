@@ -71,6 +71,7 @@ ONE_VIEW_LENGTHS_NOTE = (
     "in the add-on)")
 _MIN_FRAME_JOINTS = 6      # joints a frame needs in its best view to pose the body
 
+
 def _observations(anchors, views):
     """Clicks as an array (F, V, 17, 2), NaN where not clicked."""
     obs = np.full((len(anchors), len(views), N_JOINTS, 2), np.nan)
@@ -233,6 +234,7 @@ def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None,
     if fit_dims and all(_seen_twice(a, views) < _MIN_FRAME_JOINTS for a in anchors):
         result.notes.append(ONE_VIEW_LENGTHS_NOTE)
     return result
+
 
 def _image_size(cameras, view, uv):
     if cameras and view in cameras:

@@ -17,6 +17,7 @@ _TORSO = [JOINT_INDEX[n] for n in ("pelvis", "l_hip", "r_hip", "neck", "l_should
 # camera x = body +X (the subject's left on the image right), camera y = -Z, camera z = +Y.
 _FRONT = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 
+
 def _rot_z(angle):
     c, s = np.cos(angle), np.sin(angle)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])

@@ -19,6 +19,7 @@ EXEMPLAR_STARTS = 2
 EXEMPLAR_APART_DEG = 20.0
 EXEMPLAR_POOL = 4000
 
+
 class _UncalibratedFit(_Fit):
     """Uncalibrated views (Bregler & Malik §2.3): a scaled orthographic camera per view and
     anchor, the body root at the identity, angles shared by the views of a frame."""

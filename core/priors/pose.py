@@ -38,6 +38,7 @@ PRIOR_MIN_BANDWIDTH_DEG = 4.0
 # Gaussians per body part of the mixture that stands for the density in least squares.
 PRIOR_COMPONENTS = 8
 
+
 def mirror_angles(dof_names, angles):
     """Joint angles of the mirror-image pose (the subject's left and right swapped).
 
