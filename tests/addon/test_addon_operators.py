@@ -227,6 +227,7 @@ def test_track_operator_with_injected_worker(blender, monkeypatch, tmp_path):
 def test_initialize_operator_with_injected_worker(blender, monkeypatch):
     from zoopraxis.addon import pipeline
     from zoopraxis.core.body.body import make_body
+    from zoopraxis.core.files.initfile import InitResult
 
     settings = load_sample()
     bpy.ops.zoopraxis.load_calibration(filepath=str(SAMPLE / "calibration.json"))
@@ -235,20 +236,15 @@ def test_initialize_operator_with_injected_worker(blender, monkeypatch):
     from zoopraxis.core.files.markers import read_markers
 
     full = make_body("full")
-
-    class Init:
-        body = full
-        poses = {a.frame: full.rest_pose(np.eye(4)) for a in read_markers(SAMPLE / "markers.json")}
-        rms = {"cam0": 1.5, "cam1": 2.5}
-        warnings = ["a warning"]
-        notes = ["a note"]
-        calibrated = True
-
+    init = InitResult(full, {a.frame: full.rest_pose(np.eye(4))
+                             for a in read_markers(SAMPLE / "markers.json")}, {},
+                      warnings=["a warning"], rms={"cam0": 1.5, "cam1": 2.5},
+                      notes=["a note"], calibrated=True)
     got = {}
 
     def fake_initialize(take, progress=None, cancel=None):
         got["cameras"] = take.cameras
-        return Init()
+        return init
 
     monkeypatch.setattr(pipeline, "initialize", fake_initialize)
     assert bpy.ops.zoopraxis.initialize() == {'FINISHED'}
@@ -257,7 +253,7 @@ def test_initialize_operator_with_injected_worker(blender, monkeypatch):
     assert settings.init_notes.split("\n") == ["a warning", "note: a note"]
     assert settings.armature.name == "Zoopraxis init"
     take = pipeline.gather(blender)
-    assert isinstance(pipeline.initial_for(blender.scene, take), Init)
+    assert pipeline.initial_for(blender.scene, take) is init
     take.close()
 
 
