@@ -265,13 +265,13 @@ class ZOOPRAXIS_OT_initialize(JobOperator, bpy.types.Operator):
         settings.initialized = True
         result = result_from_initial(init, self._take)
         bake(context, result, name="init", body_mesh=True, report=print)
-        rms = getattr(init, "rms", {}) or {}
+        rms = init.rms
         worst = max(rms.values(), default=0.0)
-        warnings = list(getattr(init, "warnings", []) or [])
+        warnings = list(init.warnings)
         for w in warnings:
             print(f"zoopraxis initialize: warning: {w}")
             self.report({'WARNING'}, w)
-        notes = list(getattr(init, "notes", []) or [])
+        notes = list(init.notes)
         for n in notes:
             print(f"zoopraxis initialize: note: {n}")
             self.report({'INFO'}, n)
@@ -281,11 +281,10 @@ class ZOOPRAXIS_OT_initialize(JobOperator, bpy.types.Operator):
         settings.one_view_frames = ",".join(
             str(a.frame) for a in self._take.anchors if a.frame in init.poses
             and sum(1 for v in a.views if a.joint_count(v)) == 1)
-        settings.ambiguous_parts = pipeline.format_flips(
-            getattr(init, "ambiguous_parts", {}) or {})
+        settings.ambiguous_parts = pipeline.format_flips(init.ambiguous_parts)
         return (f"Initialized at {len(init.poses)} anchor frame(s), click error up to "
                 f"{worst:.1f} px" + (f", {len(warnings)} warning(s)" if warnings else "")
-                + (f"; {init.distance_note()}" if self._take.perspective else ""))
+                + (f"; {init.distance_note()}" if self._take.init_options.perspective else ""))
 
     def cleanup(self):
         take = getattr(self, "_take", None)
@@ -306,7 +305,7 @@ class ZOOPRAXIS_OT_flip_depth(bpy.types.Operator):
                                                   "or body")
 
     def execute(self, context):
-        from ..core.initialize.fit import FLIP_PARTS
+        from ..core.initialize.flips import FLIP_PARTS
         from . import pipeline
 
         settings = context.scene.zoopraxis

@@ -1,41 +1,20 @@
 """Adapter between the scene and the core workers: initialization, tracking, board calibration.
 
-The workers are imported lazily, when a job runs, so the add-on registers (and the rest of it
-works) in a build that lacks one of them; the user then gets a one-line error naming it. Every
-worker is called with the keyword arguments its signature accepts, so the scene side does not
-break when a worker grows or drops an option.
+The workers are imported when a job runs, so registering the add-on stays light; each is called
+with its own signature, and the options of an initialization travel as one
+:class:`core.initialize.options.InitOptions`.
 
 Everything here reads the scene on the main thread (:func:`gather`) and hands plain core objects
 to the workers, which may then run on another thread: no bpy there.
 """
 
-import importlib
-import inspect
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from ..core.errors import ZoopraxisError
 
 # The last initialization per scene, kept for the tracker (InitResult is not scene data).
 _initial = {}
-
-
-def _import(module, what):
-    try:
-        return importlib.import_module(f"..core.{module}", __package__)
-    except ModuleNotFoundError as ex:
-        if ex.name and ex.name.endswith(f"core.{module}"):
-            raise ZoopraxisError(f"{what} is not available in this build (core/{module.replace('.', '/')}.py "
-                                 "is missing)") from None
-        raise
-
-
-def call(function, *args, **options):
-    """Call ``function`` with the options its signature accepts (all of them with ``**kw``)."""
-    parameters = inspect.signature(function).parameters
-    if not any(p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters.values()):
-        options = {k: v for k, v in options.items() if k in parameters}
-    return function(*args, **options)
 
 
 @dataclass
@@ -50,8 +29,12 @@ class Take:
     anchors : list of core.markers.Anchor
     cameras : dict of str to PinholeCamera, or None when uncalibrated
     frames : range
-    template : str
     tracker : str
+    num_frames : int
+    fps : float
+    init_options : core.initialize.options.InitOptions
+        The panel's template, depth flips (of anchor frames), camera tilt, pose prior file,
+        body lengths kept from a file and near cameras.
     """
 
     plates: dict
@@ -60,35 +43,21 @@ class Take:
     anchors: list
     cameras: dict
     frames: range
-    template: str
     tracker: str
     num_frames: int
     fps: float = 30.0
     extra: dict = field(default_factory=dict)
-    flips: dict = None      # anchor frame -> body parts the animator turned in depth
-    camera_tilt: float = 0.0    # degrees an uncalibrated one-view camera looks down
-    pose_prior: str = ""        # a pose prior file for one-view anchors ("": the shipped one)
-    dims: dict = None           # the performer's lengths, kept (None: fitted to the clicks)
-    perspective: bool = False   # uncalibrated views near the body: their perspective is fitted
-
-    def prior(self):
-        """``pose_prior`` for :func:`core.initialize.fit.initialize`."""
-        return self.pose_prior or "default"
-
-    def tilt(self):
-        """``camera_tilt`` for :func:`core.initialize.fit.initialize` (uncalibrated takes)."""
-        from ..core.initialize.fit import CAMERA_TILT_DEG
-
-        return (float(self.camera_tilt), CAMERA_TILT_DEG[1])
+    init_options: object = None
 
     def close(self):
         for plate in self.plates.values():
             plate.close()
 
-    def flips_at(self, anchors):
-        """The depth flips of these anchors' frames, or None."""
+    def options_at(self, anchors):
+        """``init_options`` with the depth flips of these anchors' frames only."""
         frames = {a.frame for a in anchors}
-        return {f: p for f, p in (self.flips or {}).items() if f in frames} or None
+        flips = {f: p for f, p in (self.init_options.flips or {}).items() if f in frames}
+        return replace(self.init_options, flips=flips or None)
 
 
 def gather(context, *, need_markers=True):
@@ -100,9 +69,12 @@ def gather(context, *, need_markers=True):
         No plates, an unreadable plate, views of different lengths, no or too few markers (a
         joint marked in no view), a calibrated view without a camera, a bad frame range.
     """
+    from ..core.commands.common import read_dims
     from ..core.files.markers import check_markers, only_views, uncalibrated_views
     from ..core.files.plausible import check_calibration
     from ..core.imaging.plates import check_same_length, open_plate
+    from ..core.initialize.options import CAMERA_TILT_DEG, InitOptions
+    from ..core.priors.pose import resolve_pose_prior
     from . import markers
     from .calibration import cameras_from_scene
 
@@ -169,16 +141,18 @@ def gather(context, *, need_markers=True):
 
     pose_prior = bpy.path.abspath(settings.pose_prior_path) if settings.pose_prior_path else ""
     read_file("Pose Prior", "clear the field for the shipped prior", pose_prior,
-              lambda *a: _import("initialize.fit", "Initialization").resolve_pose_prior(*a))
+              resolve_pose_prior)
     dims = read_file("Body Lengths From", "clear the field to fit the lengths",
                      bpy.path.abspath(settings.dims_path) if settings.dims_path else "",
-                     lambda *a: _import("commands.common", "Initialization").read_dims(*a))
+                     read_dims)
     anchor_frames = {a.frame for a in anchors}
     flips = {f: p for f, p in parse_flips(settings.depth_flips).items() if f in anchor_frames}
-    return Take(plates, paths, offsets, anchors, cameras, frames, template,
-                settings.tracker.lower(), n, fps, flips=flips or None,
-                camera_tilt=settings.camera_tilt, pose_prior=pose_prior, dims=dims,
-                perspective=cameras is None and settings.near_cameras)
+    options = InitOptions(template=template, flips=flips or None,
+                          pose_prior=pose_prior or "default", dims=dims,
+                          camera_tilt=(float(settings.camera_tilt), CAMERA_TILT_DEG[1]),
+                          perspective=cameras is None and settings.near_cameras)
+    return Take(plates, paths, offsets, anchors, cameras, frames, settings.tracker.lower(), n,
+                fps, init_options=options)
 
 
 def parse_flips(text):
@@ -202,18 +176,14 @@ def format_flips(flips):
 
 
 def initialize(take, *, progress=None, cancel=None):
-    """Fit the body to the markers (:func:`core.initialize.fit.initialize`)."""
-    module = _import("initialize.fit", "initialization")
+    """Fit the body to the markers (:func:`core.initialize.run.initialize_take`)."""
+    from ..core.initialize.run import initialize_take
+
     if progress:
         progress(0, 1)
     inside = [a for a in take.anchors if a.frame in take.frames] or take.anchors
-    cameras = take.cameras if take.cameras is not None else \
-        {v: p.image_size for v, p in take.plates.items()}
-    result = call(module.initialize, inside, cameras, template=take.template,
-                  calibrated=take.cameras is not None, views=list(take.plates),
-                  flips=take.flips_at(inside), camera_tilt=take.tilt(),
-                  pose_prior=take.prior(), dims=take.dims, fit_dims=not take.dims,
-                  perspective=take.perspective)
+    result = initialize_take(inside, list(take.plates), take.plates, take.cameras,
+                             take.options_at(inside))
     if progress:
         progress(1, 1)
     return result
@@ -229,16 +199,17 @@ def _fingerprint(take):
                    for j, (u, w) in sorted(joints.items()))
     cameras = None if take.cameras is None else tuple(
         (v, tuple(round(x, 6) for x in c.P.ravel())) for v, c in sorted(take.cameras.items()))
-    flips = tuple(sorted((f, tuple(p)) for f, p in (take.flips or {}).items()))
-    tilt = round(float(take.camera_tilt), 3) if take.cameras is None else None
+    options = take.init_options
+    flips = tuple(sorted((f, tuple(p)) for f, p in (options.flips or {}).items()))
+    tilt = round(float(options.camera_tilt[0]), 3) if take.cameras is None else None
     prior = None
-    if take.pose_prior:
+    if options.pose_prior != "default":
         try:
-            prior = (take.pose_prior, os.stat(take.pose_prior).st_mtime_ns)
+            prior = (options.pose_prior, os.stat(options.pose_prior).st_mtime_ns)
         except OSError:
-            prior = (take.pose_prior, None)
-    dims = None if not take.dims else tuple(sorted(take.dims.items()))
-    return take.template, cameras, clicks, flips, tilt, prior, dims, take.perspective
+            prior = (options.pose_prior, None)
+    dims = None if not options.dims else tuple(sorted(options.dims.items()))
+    return options.template, cameras, clicks, flips, tilt, prior, dims, options.perspective
 
 
 def remember_initial(scene, init, take):
@@ -259,25 +230,19 @@ def forget(scene=None):
 
 
 def track(take, *, init=None, progress=None, cancel=None, log=None):
-    """Track the take (:func:`core.take.track.track`, or the particle/hybrid trackers)."""
-    options = dict(frames=take.frames, offsets=take.offsets, template=take.template, init=init,
-                   progress=progress, cancel=cancel, log=log)
-    flips = take.flips_at([a for a in take.anchors if a.frame in take.frames])
-    if flips and init is None:
-        options["flips"] = flips
-    if init is None and take.pose_prior:
-        options["pose_prior"] = take.prior()
-    if init is None and take.dims:
-        options["dims"] = take.dims
-    if init is None and take.cameras is None and take.tracker == "differential":
-        options["camera_tilt"] = take.tilt()
-        options["perspective"] = take.perspective
+    """Track the take (:func:`core.take.track.track`, or the particle/hybrid trackers); without
+    ``init`` the tracker initializes from the markers with the take's options."""
+    options = dict(frames=take.frames, offsets=take.offsets, init=init, progress=progress,
+                   cancel=cancel, log=log, init_options=take.options_at(
+                       [a for a in take.anchors if a.frame in take.frames]))
     if take.tracker == "differential":
-        module = _import("take.track", "the differential tracker")
-        return call(module.track, take.plates, take.anchors, take.cameras, **options)
-    module = _import("take.track", f"the {take.tracker} tracker")
-    return call(module.track_filter, take.plates, take.anchors, take.cameras, tracker=take.tracker,
-                **options)
+        from ..core.take.track import track as differential
+
+        return differential(take.plates, take.anchors, take.cameras, **options)
+    from ..core.take.track import track_filter
+
+    return track_filter(take.plates, take.anchors, take.cameras, tracker=take.tracker,
+                        **options)
 
 
 class _ShiftedPlate:
@@ -314,10 +279,11 @@ def calibrate(take, board, *, step=1, world_frame=None, max_rms=None, progress=N
     result : core.calibrate.CalibrationResult
         ``cameras`` and ``rms`` by view name, ``world_frame``, ``warnings``.
     """
-    module = _import("calibration.calibrate", "board calibration")
+    from ..core.calibration.calibrate import calibrate as calibrate_plates
+
     plates = {v: _ShiftedPlate(p, take.offsets.get(v, 0), take.num_frames)
               for v, p in take.plates.items()}
     options = dict(step=step, world_frame=world_frame, progress=progress, cancel=cancel)
     if max_rms is not None:
         options["max_rms"] = max_rms
-    return call(module.calibrate, plates, board, take.frames, **options)
+    return calibrate_plates(plates, board, take.frames, **options)

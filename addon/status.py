@@ -63,11 +63,10 @@ def result_from_initial(init, take):
     n, j = len(frames), len(STANDARD_JOINTS)
     views = list(take.plates) if take is not None else []
     return TrackResult(
-        mode="calibrated" if getattr(init, "calibrated", True) else "uncalibrated",
+        mode="calibrated" if init.calibrated else "uncalibrated",
         fps=getattr(take, "fps", 30.0), frames=np.array(frames), joints3d=X,
         joints2d={v: np.full((n, j, 2), np.nan) for v in views},
-        residual={v: np.array([float((getattr(init, "rms", {}) or {}).get(v, 0.0))] * n)
-                  for v in views},
+        residual={v: np.array([float(init.rms.get(v, 0.0))] * n) for v in views},
         status=["ok"] * n,
         body={"template": body.template, "shapes": body.shapes, "dims": dict(body.dims),
               "dof_names": list(body.dof_names)},

@@ -43,6 +43,7 @@ import numpy as np  # noqa: E402
 
 from bench_track import markers_from_truth, procrustes_mpjpe  # noqa: E402
 from zoopraxis.core.body import fit3d  # noqa: E402
+from zoopraxis.core.files.initfile import InitResult  # noqa: E402
 from zoopraxis.core.synthetic import synth  # noqa: E402
 from zoopraxis.core.take import track as T  # noqa: E402
 from zoopraxis.core.take.track import track_filter  # noqa: E402
@@ -74,7 +75,7 @@ def run_case(name, tracker, *, quick, init_mode, particles, seed, layers=None,
     init = None
     if init_mode == "truth":
         body, poses, _ = fit3d.fit_sequence(joints[:1])
-        init = T.Initial(body, {0: poses[0]}, cams)
+        init = InitResult(body, {0: poses[0]}, cams)
     t0 = time.perf_counter()
     if tracker == "differential":
         res = T.track(plates, anchors, cams, init=init)

@@ -36,8 +36,12 @@ import numpy as np  # noqa: E402
 
 from zoopraxis.core.body import body as bm  # noqa: E402
 from zoopraxis.core.calibration import calibrate as cal  # noqa: E402
-from zoopraxis.core.initialize import fit as init  # noqa: E402
 from zoopraxis.core.geometry import se3  # noqa: E402
+from zoopraxis.core.geometry.triangulate import procrustes_mpjpe  # noqa: E402
+from zoopraxis.core.initialize.flips import FLIP_PARTS, LR_PAIRS  # noqa: E402
+from zoopraxis.core.initialize.refine import refine_dims  # noqa: E402
+from zoopraxis.core.initialize.run import initialize  # noqa: E402
+from zoopraxis.core.priors.pose import PosePrior, default_pose_prior  # noqa: E402
 from zoopraxis.core.synthetic import synth  # noqa: E402
 from zoopraxis.core.geometry.camera import PinholeCamera, look_at, ring_of_cameras  # noqa: E402
 from zoopraxis.core.body.joints import JOINT_INDEX, STANDARD_JOINTS  # noqa: E402
@@ -113,12 +117,12 @@ def best_flip(anchor, cams, X, first, **options):
     """Procrustes-aligned error (mm) after the one depth flip (``initialize.FLIP_PARTS``, or
     none) an animator judging the fitted body by eye would make at the anchor: the one that
     lowers the error most. Stands for the animator's judgement, so reported apart."""
-    errors = [1000 * init.procrustes_mpjpe(first.joints3d(0), X)]
-    for part in init.FLIP_PARTS:
-        result = init.initialize(anchor, {c.name: c for c in cams}, calibrated=False,
+    errors = [1000 * procrustes_mpjpe(first.joints3d(0), X)]
+    for part in FLIP_PARTS:
+        result = initialize(anchor, {c.name: c for c in cams}, calibrated=False,
                                  flips={0: [part]}, **options)
         if result.flipped:
-            errors.append(1000 * init.procrustes_mpjpe(result.joints3d(0), X))
+            errors.append(1000 * procrustes_mpjpe(result.joints3d(0), X))
     return min(errors)
 
 
@@ -127,7 +131,7 @@ def everyday_prior():
     EVERYDAY_PRIOR_POSES other random everyday poses of other random bodies, like an animator's
     own takes of it."""
     kind = np.random.default_rng(7)      # apart from the benchmark's own draws
-    return init.PosePrior.from_takes({"everyday": np.array(
+    return PosePrior.from_takes({"everyday": np.array(
         [synth.everyday_pose(synth.random_subject(kind), kind).angles
          for _ in range(EVERYDAY_PRIOR_POSES)])})
 
@@ -140,10 +144,10 @@ def body_model_cases(table, rng, n):
             X = body.joints(synth.everyday_pose(body, rng))
             cams = ring(3, rng, plate)
             t = time.perf_counter()
-            result = init.initialize([Anchor(0, clicks(cams, X, rng))], {c.name: c for c in cams})
+            result = initialize([Anchor(0, clicks(cams, X, rng))], {c.name: c for c in cams})
             secs.append(time.perf_counter() - t)
             err.append(1000 * mpjpe(result.joints3d(0), X))
-            pa.append(1000 * init.procrustes_mpjpe(result.joints3d(0), X))
+            pa.append(1000 * procrustes_mpjpe(result.joints3d(0), X))
             seg.append(100 * segment_error(result.body, body.dims))
         case = f"body model, 3 calibrated, {label}, 1 anchor"
         table.add(case, "MPJPE mm", err, "<= 25")
@@ -157,7 +161,7 @@ def body_model_cases(table, rng, n):
         cams = ring(3, rng, VGA_4M)
         poses = [synth.everyday_pose(body, rng) for _ in range(3)]
         anchors = [Anchor(k, clicks(cams, body.joints(p), rng)) for k, p in enumerate(poses)]
-        result = init.initialize(anchors, {c.name: c for c in cams})
+        result = initialize(anchors, {c.name: c for c in cams})
         seg.append(100 * segment_error(result.body, body.dims))
         err += [1000 * mpjpe(result.joints3d(k), body.joints(p)) for k, p in enumerate(poses)]
     case = "body model, 3 calibrated, 640x480 @4m, 3 anchors"
@@ -166,7 +170,7 @@ def body_model_cases(table, rng, n):
     # uncalibrated (the shipped pose prior, learned on CMU captures: no overlap with these).
     # One view's error is a few wrong depth signs of whole limbs, each worth 50-100 mm: it
     # varies so much from pose to pose that these rows take ONE_VIEW_TRIALS times as many.
-    prior = init.default_pose_prior("full")
+    prior = default_pose_prior("full")
     everyday = everyday_prior()
     for views, label, plate in ((1, "1080p @100m", FHD_100M), (1, "1080p @10m", FHD_10M),
                                 (1, "640x480 @10m", VGA_10M), (3, "640x480 @10m", VGA_10M)):
@@ -178,23 +182,23 @@ def body_model_cases(table, rng, n):
             cams = ring(views, rng, plate)
             anchor = [Anchor(0, clicks(cams, X, rng))]
             t = time.perf_counter()
-            result = init.initialize(anchor, {c.name: c for c in cams}, calibrated=False)
+            result = initialize(anchor, {c.name: c for c in cams}, calibrated=False)
             secs.append(time.perf_counter() - t)
-            pa.append(1000 * init.procrustes_mpjpe(result.joints3d(0), X))
+            pa.append(1000 * procrustes_mpjpe(result.joints3d(0), X))
             seg.append(100 * segment_error(result.body, body.dims, proportions=True))
             amb.append(100.0 * result.ambiguous)
             if plate is FHD_100M and views == 1:
-                kind_result = init.initialize(anchor, {c.name: c for c in cams},
+                kind_result = initialize(anchor, {c.name: c for c in cams},
                                               calibrated=False, pose_prior=everyday)
-                pa_kind.append(1000 * init.procrustes_mpjpe(kind_result.joints3d(0), X))
+                pa_kind.append(1000 * procrustes_mpjpe(kind_result.joints3d(0), X))
             if trial >= n:
                 continue        # the rows below: the first n poses only (slow)
             if plate is FHD_100M and views == 1:
                 flipped.append(best_flip(anchor, cams, X, result))
             if plate is FHD_100M and prior is not None:
-                off = init.initialize(anchor, {c.name: c for c in cams}, calibrated=False,
+                off = initialize(anchor, {c.name: c for c in cams}, calibrated=False,
                                       pose_prior=None)
-                pa_off.append(1000 * init.procrustes_mpjpe(off.joints3d(0), X))
+                pa_off.append(1000 * procrustes_mpjpe(off.joints3d(0), X))
                 nats.append(float(prior.cost(pose.angles[None])[0]))
         case = f"body model, {views} uncalibrated, {label}"
         table.add(case, "PA-MPJPE mm", pa, "<= 40" if views == 1 else "")
@@ -252,22 +256,22 @@ def cmu_cases(table, rng, n):
         err, pa, pa_first, pa_off, nats, flipped = [], [], [], [], [], []
         for k, (name, X) in enumerate(frames[1 if calibrated else ONE_VIEW_TRIALS]):
             if name not in priors:
-                priors[name] = init.PosePrior.load(exclude=[name])
+                priors[name] = PosePrior.load(exclude=[name])
             cams = ring(views, rng, plate, aim_at(X))
             anchor = [Anchor(0, clicks(cams, X, rng))]
-            result = init.initialize(anchor, {c.name: c for c in cams}, calibrated=calibrated,
+            result = initialize(anchor, {c.name: c for c in cams}, calibrated=calibrated,
                                      pose_prior=priors[name])
             if calibrated:
                 err.append(1000 * mpjpe(result.joints3d(0), X))
             elif k % ONE_VIEW_TRIALS == 0:      # 1 frame in ONE_VIEW_TRIALS only (slow)
-                pa_first.append(1000 * init.procrustes_mpjpe(result.joints3d(0), X))
+                pa_first.append(1000 * procrustes_mpjpe(result.joints3d(0), X))
                 flipped.append(best_flip(anchor, cams, X, result, pose_prior=priors[name]))
-                off = init.initialize(anchor, {c.name: c for c in cams}, calibrated=False,
+                off = initialize(anchor, {c.name: c for c in cams}, calibrated=False,
                                       pose_prior=None)
-                pa_off.append(1000 * init.procrustes_mpjpe(off.joints3d(0), X))
+                pa_off.append(1000 * procrustes_mpjpe(off.joints3d(0), X))
                 truth = fit3d.fit_pose(bm.make_body("full", fit3d.dims_from_joints(X)), X)[0]
                 nats.append(float(priors[name].cost(truth.angles[None])[0]))
-            pa.append(1000 * init.procrustes_mpjpe(result.joints3d(0), X))
+            pa.append(1000 * procrustes_mpjpe(result.joints3d(0), X))
         label = "640x480 @4m" if calibrated else "1080p @100m"
         case = f"CMU frames, {views} {'calibrated' if calibrated else 'uncalibrated'}, {label}"
         if calibrated:
@@ -302,18 +306,18 @@ def known_lengths_cases(table, rng, n):
         cams = ring(3, rng, FHD_10M, aim_at(shoot[third]))
         anchors = [Anchor(int(f), clicks(cams, shoot[f], rng))
                    for f in (7, third + 7, 2 * third + 7)]
-        body = init.initialize(anchors, {c.name: c for c in cams}).body
+        body = initialize(anchors, {c.name: c for c in cams}).body
         seg.append(100 * segment_error(body, fit3d.dims_from_joints(shoot[::30])))
-        prior = init.PosePrior.load(exclude=[name])
+        prior = PosePrior.load(exclude=[name])
         for i in cmu_frames(len(joints), ONE_VIEW_TRIALS, n):
             X = joints[i]
             cam = ring(1, rng, FHD_100M, aim_at(X))
             t = time.perf_counter()
-            result = init.initialize([Anchor(0, clicks(cam, X, rng))], {cam[0].name: cam[0]},
+            result = initialize([Anchor(0, clicks(cam, X, rng))], {cam[0].name: cam[0]},
                                      calibrated=False, pose_prior=prior, dims=body.dims,
                                      fit_dims=False)
             secs.append(time.perf_counter() - t)
-            pa.append(1000 * init.procrustes_mpjpe(result.joints3d(0), X))
+            pa.append(1000 * procrustes_mpjpe(result.joints3d(0), X))
     case = "CMU frames, 1 uncalibrated, 1080p @100m, lengths of a 3-view init"
     table.add(case, "PA-MPJPE mm (vs CMU joints)", pa)
     table.add(case, "3-view lengths' segment err %", seg)
@@ -335,19 +339,19 @@ def one_view_anchors_cases(table, rng, n, apart=25):
     for name in ("131_01", "131_03", "01_01"):
         joints = cmu_joints(name)
         true_dims = fit3d.dims_from_joints(joints[::30])
-        prior = init.PosePrior.load(exclude=[name])
+        prior = PosePrior.load(exclude=[name])
         for i in np.linspace(0, len(joints) - 1, max(2, n // 3)).astype(int):
             frames = [int(i + k * apart) % len(joints) for k in range(3)]
             cam = ring(1, rng, FHD_100M, aim_at(joints[i]))
             anchors = [Anchor(f, clicks(cam, joints[f], rng)) for f in frames]
             cameras = {cam[0].name: cam[0]}
-            result = init.initialize(anchors, cameras, calibrated=False, pose_prior=prior)
-            together += [1000 * init.procrustes_mpjpe(result.joints3d(f), joints[f])
+            result = initialize(anchors, cameras, calibrated=False, pose_prior=prior)
+            together += [1000 * procrustes_mpjpe(result.joints3d(f), joints[f])
                          for f in frames]
             seg_together.append(100 * segment_error(result.body, true_dims, proportions=True))
             for anchor in anchors:
-                one = init.initialize([anchor], cameras, calibrated=False, pose_prior=prior)
-                alone.append(1000 * init.procrustes_mpjpe(one.joints3d(anchor.frame),
+                one = initialize([anchor], cameras, calibrated=False, pose_prior=prior)
+                alone.append(1000 * procrustes_mpjpe(one.joints3d(anchor.frame),
                                                           joints[anchor.frame]))
                 seg_alone.append(100 * segment_error(one.body, true_dims, proportions=True))
     case = f"CMU frames, 1 uncalibrated, 1080p @100m, 3 anchors {apart} frames apart"
@@ -371,20 +375,20 @@ def length_error_cases(table, rng, n, errors=(0.0, 0.01, 0.02, 0.05)):
     for name in ("131_01", "131_03", "01_01"):
         joints = cmu_joints(name)
         true_dims = fit3d.dims_from_joints(joints[::30])
-        prior = init.PosePrior.load(exclude=[name])
+        prior = PosePrior.load(exclude=[name])
         for i in cmu_frames(len(joints), 2, n):
             X = joints[i]
             cam = ring(1, rng, FHD_100M, aim_at(X))
             anchor = [Anchor(0, clicks(cam, X, rng))]
             cameras = {cam[0].name: cam[0]}
-            result = init.initialize(anchor, cameras, calibrated=False, pose_prior=prior)
-            fitted.append(1000 * init.procrustes_mpjpe(result.joints3d(0), X))
+            result = initialize(anchor, cameras, calibrated=False, pose_prior=prior)
+            fitted.append(1000 * procrustes_mpjpe(result.joints3d(0), X))
             seg.append(100 * segment_error(result.body, true_dims, proportions=True))
             for e in errors:
                 dims = {k: v * (1.0 + rng.normal(0.0, e)) for k, v in true_dims.items()}
-                result = init.initialize(anchor, cameras, calibrated=False, pose_prior=prior,
+                result = initialize(anchor, cameras, calibrated=False, pose_prior=prior,
                                          dims=dims, fit_dims=False)
-                kept[e].append(1000 * init.procrustes_mpjpe(result.joints3d(0), X))
+                kept[e].append(1000 * procrustes_mpjpe(result.joints3d(0), X))
     case = "CMU frames, 1 uncalibrated, 1080p @100m, lengths"
     table.add(case, "PA-MPJPE mm (vs CMU joints), fitted", fitted, "<= 40")
     table.add(case, "proportions err %, fitted", seg)
@@ -404,9 +408,9 @@ def near_view_cases(table, rng, n):
         anchor = [Anchor(0, clicks(cams, X, rng))]
         for out, perspective in ((flat, False), (near, True)):
             t = time.perf_counter()
-            result = init.initialize(anchor, {c.name: c for c in cams}, calibrated=False,
+            result = initialize(anchor, {c.name: c for c in cams}, calibrated=False,
                                      perspective=perspective)
-            out.append(1000 * init.procrustes_mpjpe(result.joints3d(0), X))
+            out.append(1000 * procrustes_mpjpe(result.joints3d(0), X))
         secs.append(time.perf_counter() - t)
         kappa = result.cameras[cams[0].name].kappa
         distance.append(1.0 / kappa if kappa else np.inf)
@@ -427,14 +431,14 @@ def swap_cases(table, rng, n):
         X = body.joints(synth.everyday_pose(body, rng))
         cams = ring(3, rng, VGA_4M)
         views = clicks(cams, X, rng)
-        result = init.initialize([Anchor(0, views)], {c.name: c for c in cams})
+        result = initialize([Anchor(0, views)], {c.name: c for c in cams})
         clean_false.append(100.0 * bool(result.swapped))
-        left, right = init.LR_PAIRS[rng.integers(len(init.LR_PAIRS))]
+        left, right = LR_PAIRS[rng.integers(len(LR_PAIRS))]
         view = f"cam{rng.integers(3)}"
         if np.linalg.norm(np.subtract(views[view][left], views[view][right])) < 15:
             continue                      # clicks that close are not a visible mistake
         views[view][left], views[view][right] = views[view][right], views[view][left]
-        result = init.initialize([Anchor(0, views)], {c.name: c for c in cams})
+        result = initialize([Anchor(0, views)], {c.name: c for c in cams})
         found.append(100.0 * ((0, view, left, right) in result.swapped))
     case = "swapped l/r clicks, 3 calibrated, 640x480"
     table.add(case, "swaps named %", found)
@@ -450,7 +454,7 @@ def refine_cases(table, rng, frames):
     start = {f: bm.Pose(se3.exp_se3(rng.normal(0, 0.02, 6)) @ p.root,
                         p.angles + rng.normal(0, 0.05, p.angles.size)) for f, p in poses.items()}
     t = time.perf_counter()
-    result = init.refine_dims(bm.make_body("full"), start, obs, {c.name: c for c in cams})
+    result = refine_dims(bm.make_body("full"), start, obs, {c.name: c for c in cams})
     secs = time.perf_counter() - t
     case = f"refine_dims, {frames} frames, 3 views, 2 px"
     table.add(case, "segment length err %",
@@ -467,7 +471,7 @@ def finetune_cases(table, frames, rng):
     from zoopraxis.core.take import finetune as ft
     from zoopraxis.core.body import fit3d
     from zoopraxis.core.synthetic import synth
-    from zoopraxis.core.take.track import Initial
+    from zoopraxis.core.files.initfile import InitResult
 
     if not CMU.is_dir():
         print(f"  (no CMU data at {CMU}: fine-tuning case skipped)", file=sys.stderr)
@@ -478,12 +482,12 @@ def finetune_cases(table, frames, rng):
     wrong = truth.with_dims({n: 1.09 * truth.dims[n] for n in bm.LENGTH_DIMS})
     cams = {c.name: c for c in scene.cameras}
     anchor = Anchor(0, clicks(scene.cameras, joints[0], rng))
-    start = init.initialize([anchor], cams, dims=wrong.dims, fit_dims=False).poses[0]
+    start = initialize([anchor], cams, dims=wrong.dims, fit_dims=False).poses[0]
     for label, backgrounds in (("estimated backgrounds", None),
                                ("clean plates", dict(zip(cams, scene.backgrounds)))):
         t = time.perf_counter()
         out = ft.finetune(synth.scene_plates(scene), [anchor], cams, backgrounds=backgrounds,
-                          init=Initial(wrong, {0: start}, cams))
+                          init=InitResult(wrong, {0: start}, cams))
         secs = time.perf_counter() - t
         case = f"fine-tune, 2 calibrated 320x240, {frames} frames, +9 %, {label}"
         for when, body in (("before", out.body_before), ("after", out.body_after)):
@@ -563,13 +567,13 @@ def limits_cases(table, rng, n):
         for label, prior in priors.items():
             for lengths, options in (("lengths fitted", {}),
                                      ("true lengths kept", dict(dims=dims, fit_dims=False))):
-                result = init.initialize(anchor, cameras, calibrated=False, pose_prior=prior,
+                result = initialize(anchor, cameras, calibrated=False, pose_prior=prior,
                                          **options)
                 # the target is about what ships; the other rows add what no animator has
                 target = "<= 40" if label in ("shipped prior", "held-out prior") \
                     and not options else ""
                 rows.setdefault((case, f"PA-MPJPE mm, {label}, {lengths}", target), []).append(
-                    1000 * init.procrustes_mpjpe(result.joints3d(0), X))
+                    1000 * procrustes_mpjpe(result.joints3d(0), X))
 
     kind = {"shipped prior": "default", "prior of the kind judged": everyday_prior()}
     for _ in range(n * ONE_VIEW_TRIALS):
@@ -581,11 +585,11 @@ def limits_cases(table, rng, n):
     if CMU.is_dir():
         from zoopraxis.core.body import fit3d
 
-        everything = init.PosePrior.load()
+        everything = PosePrior.load()
         for name in ("131_01", "131_03", "01_01"):
             joints = cmu_joints(name)
             dims = fit3d.dims_from_joints(joints[::30])
-            priors = {"held-out prior": init.PosePrior.load(exclude=[name]),
+            priors = {"held-out prior": PosePrior.load(exclude=[name]),
                       "in-sample prior": everything}
             for i in cmu_frames(len(joints), 2, n):
                 X = joints[i]
@@ -628,9 +632,9 @@ def held_out_subjects_cases(table, rng, n):
     rows = {}
     per_subject = max(1, n // 5)
     for fold in SUBJECT_FOLDS:
-        pose = init.PosePrior.load(exclude_subjects=fold)
+        pose = PosePrior.load(exclude_subjects=fold)
         keep = np.isin(pose.takes.astype(str), FOUR_TAKES)
-        four = init.PosePrior(pose.samples[keep], pose.dof_names, pose.template,
+        four = PosePrior(pose.samples[keep], pose.dof_names, pose.template,
                               pose.takes[keep]) if keep.any() else None
         proportions = ProportionsPrior.load(exclude=fold)
         variants = (("prior of the 4 takes before cmu_more, template proportions", four,
@@ -653,9 +657,9 @@ def held_out_subjects_cases(table, rng, n):
                         continue
                     options = dict(dims=fit3d.dims_from_joints(joints[::30]),
                                    fit_dims=False) if true_lengths else {}
-                    result = init.initialize(anchor, cameras, calibrated=False,
+                    result = initialize(anchor, cameras, calibrated=False,
                                              pose_prior=prior, proportions=props, **options)
-                    error = 1000 * init.procrustes_mpjpe(result.joints3d(0), X)
+                    error = 1000 * procrustes_mpjpe(result.joints3d(0), X)
                     rows.setdefault(label, []).append(error)
                     kind = "Daz figure" if take.skeleton == "cmu_daz" else "own lengths"
                     rows.setdefault(f"{label}; {kind}", []).append(error)

@@ -25,6 +25,7 @@ import numpy as np  # noqa: E402
 from zoopraxis.core.files import markers  # noqa: E402
 from zoopraxis.core.imaging import plates  # noqa: E402
 from zoopraxis.core.imaging.contact_sheet import contact_sheet  # noqa: E402
+from zoopraxis.core.initialize.options import InitOptions  # noqa: E402
 from zoopraxis.core.take.track import track  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
@@ -68,7 +69,7 @@ def main():
                              ("+ prior of walks", walking_prior(folder))):
             t0 = time.perf_counter()
             run = track({"cam0": plate}, anchors, None, frames=FRAMES, log=print,
-                        pose_prior=prior)
+                        init_options=InitOptions(pose_prior=prior))
             elapsed = time.perf_counter() - t0
             fit = np.array(run.extra["silhouette_fit"])[:, 0]
             print(f"{label}:")

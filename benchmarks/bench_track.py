@@ -118,6 +118,7 @@ def write_plates(scene, folder):
 
 
 def run_case(name, spec, *, quick, init_mode, anchor_every, workers=1, whole_passes=False):
+    from zoopraxis.core.files.initfile import InitResult
     from zoopraxis.core.take import track as T
 
     bvh, start, n, views, calibrated, noise, clutter, build, fps, every = spec
@@ -140,7 +141,7 @@ def run_case(name, spec, *, quick, init_mode, anchor_every, workers=1, whole_pas
         body, poses, _ = fit3d.fit_sequence(joints[anchor_frames])
         if not calibrated:
             raise SystemExit("--init truth needs calibrated cases")
-        init = T.Initial(body, {f: p for f, p in zip(anchor_frames, poses)}, cams)
+        init = InitResult(body, {f: p for f, p in zip(anchor_frames, poses)}, cams)
     t0 = time.perf_counter()
     reach = {"blend_reach": None} if whole_passes else {}
     res = T.track(plates, anchors, cams, init=init, workers=workers, **reach,

@@ -29,7 +29,7 @@ from pathlib import Path
 from zoopraxis import cli
 from zoopraxis.core.files import bvh
 from zoopraxis.core.errors import ZoopraxisError
-from zoopraxis.core.initialize.fit import DEFAULT_POSE_PRIOR
+from zoopraxis.core.priors.pose import DEFAULT_POSE_PRIOR
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = [REPO.parent / "shared" / "data" / "cmu_more", REPO.parent / "shared" / "data" / "cmu_mocap"]

@@ -38,8 +38,6 @@ def parse_flips(items):
     ZoopraxisError
         An option that is not FRAME:PART with a known part.
     """
-    from ..initialize.fit import parse_flip
-
     out = {}
     for item in items or ():
         frame, part = parse_flip(item)
@@ -48,9 +46,30 @@ def parse_flips(items):
     return out or None
 
 
+def parse_flip(text):
+    """``"80:left-leg"`` -> ``(80, "left leg")`` (the command line's ``--flip``).
+
+    Raises
+    ------
+    ZoopraxisError
+    """
+    from ..initialize.flips import FLIP_PARTS, flip_part
+
+    frame, _, part = str(text).partition(":")
+    try:
+        frame = int(frame)
+    except ValueError:
+        frame = None
+    name = flip_part(part) if part else None
+    if frame is None or name is None:
+        raise ZoopraxisError(f"--flip '{text}': expected FRAME:PART, PART one of "
+                             f"{', '.join(p.replace(' ', '-') for p in FLIP_PARTS)}")
+    return frame, name
+
+
 def add_camera_tilt_argument(parser):
     """``--camera-tilt DOWN[:SPREAD]`` for frames clicked in one uncalibrated view."""
-    from ..initialize.fit import CAMERA_TILT_DEG
+    from ..initialize.options import CAMERA_TILT_DEG
 
     down, spread = CAMERA_TILT_DEG
     parser.add_argument("--camera-tilt", default=None, metavar="DOWN[:SPREAD]",
@@ -97,7 +116,7 @@ def parse_pose_prior(args, template):
     ZoopraxisError
         Both options, or a missing, unreadable or mismatched file (naming it).
     """
-    from ..initialize.fit import resolve_pose_prior
+    from ..priors.pose import resolve_pose_prior
 
     if args.pose_prior is not None and args.no_pose_prior:
         raise ZoopraxisError("give --pose-prior or --no-pose-prior, not both")
@@ -117,7 +136,7 @@ def parse_camera_tilt(text):
     ZoopraxisError
         Not DOWN or DOWN:SPREAD in range.
     """
-    from ..initialize.fit import CAMERA_TILT_DEG, check_camera_tilt
+    from ..initialize.options import CAMERA_TILT_DEG, check_camera_tilt
 
     if text is None:
         return CAMERA_TILT_DEG
@@ -134,6 +153,29 @@ def parse_camera_tilt(text):
                              "(say 15:10), or none")
     return check_camera_tilt((values[0], values[1] if len(values) == 2 else CAMERA_TILT_DEG[1]),
                              f"--camera-tilt {text}")
+
+
+def parse_init_options(args, calibrated, fit_dims=True):
+    """The :class:`InitOptions` of the command line's initialization options (``--template``,
+    ``--flip``, ``--camera-tilt``, ``--perspective``, ``--pose-prior`` / ``--no-pose-prior``,
+    ``--dims-from``), each checked.
+
+    Raises
+    ------
+    ZoopraxisError
+        As the parsers of each option; ``--camera-tilt`` or ``--perspective`` with a
+        calibration.
+    """
+    from ..initialize.options import InitOptions
+
+    flips = parse_flips(args.flip)
+    camera_tilt = parse_camera_tilt(args.camera_tilt)
+    check_uncalibrated_options(args, calibrated)
+    pose_prior = parse_pose_prior(args, args.template)
+    dims = read_dims(args.dims_from, args.template) if args.dims_from else None
+    return InitOptions(template=args.template, flips=flips, pose_prior=pose_prior, dims=dims,
+                       fit_dims=fit_dims, camera_tilt=camera_tilt,
+                       perspective=args.perspective)
 
 
 def add_output_arguments(parser, what):

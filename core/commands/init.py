@@ -5,9 +5,8 @@ import json
 import sys
 
 from .common import (add_camera_tilt_argument, add_dims_argument, add_output_arguments,
-                         add_perspective_argument, add_pose_prior_arguments,
-                         check_output, check_template, check_uncalibrated_options,
-                         parse_camera_tilt, parse_flips, parse_pose_prior, read_dims)
+                     add_perspective_argument, add_pose_prior_arguments, check_output,
+                     check_template, parse_init_options)
 from ..errors import ZoopraxisError
 
 
@@ -43,7 +42,7 @@ def main(argv):
     from ..files.calibfile import check_views, read_calibration
     from .calibrate import parse_plate_options
     from .common import open_plates
-    from ..initialize.fit import initialize
+    from ..initialize.run import initialize_take
     from ..files.markers import check_markers, read_markers
     from ..files.outputs import write_text
     from ..files.plausible import check_calibration
@@ -54,11 +53,8 @@ def main(argv):
         ("--dims-from", args.dims_from), ("--pose-prior", args.pose_prior),
         *((f"--plate {view}", path) for view, path in parse_plate_options(args.plate).items())])
     check_template(args.template)
-    flips = parse_flips(args.flip)
-    camera_tilt = parse_camera_tilt(args.camera_tilt)
-    pose_prior = parse_pose_prior(args, args.template)
-    check_uncalibrated_options(args, bool(args.calibration))
-    dims = read_dims(args.dims_from, args.template) if args.dims_from else None
+    options = parse_init_options(args, bool(args.calibration), fit_dims=not args.fixed_dims)
+    dims = options.dims
     plates = open_plates(parse_plate_options(args.plate))
     views = list(plates)
     anchors = read_markers(args.markers)
@@ -75,16 +71,13 @@ def main(argv):
         for warning in check_calibration(cameras, anchors, args.calibration):
             print(f"warning: {warning}")
     else:
-        cameras = {name: plate.image_size for name, plate in plates.items()}
+        cameras = None
     mode = "calibrated" if args.calibration else "uncalibrated"
     print(f"init: fitting {len(anchors)} anchor frame{'s' if len(anchors) > 1 else ''} in "
           f"{len(views)} view{'s' if len(views) > 1 else ''} ({mode})", file=sys.stderr,
           flush=True)
-    result = initialize(anchors, cameras, template=args.template,
-                        calibrated=bool(args.calibration), dims=dims,
-                        fit_dims=not (args.fixed_dims or dims),
-                        views=views, pose_prior=pose_prior,
-                        flips=flips, camera_tilt=camera_tilt, perspective=args.perspective)
+    # the notes are printed below, after the lengths and click errors
+    result = initialize_take(anchors, views, plates, cameras, options)
     print("body dimensions (m): " + ", ".join(f"{name} {result.body.dims[name]:.3f}"
                                              for name in LENGTH_DIMS)
           + (f" (kept from {args.dims_from})" if dims else ""))

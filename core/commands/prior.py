@@ -78,7 +78,7 @@ def read_take_joints(path):
 def main(argv):
     import numpy as np
 
-    from ..initialize.fit import PosePrior, take_angles
+    from ..priors.pose import PosePrior, take_angles
     from ..files.outputs import replacing
 
     args = build_parser().parse_args(argv)

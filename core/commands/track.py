@@ -4,9 +4,8 @@ import argparse
 import time
 
 from .common import (add_camera_tilt_argument, add_dims_argument, add_output_arguments,
-                         add_perspective_argument, add_pose_prior_arguments, check_output,
-                         check_uncalibrated_options, open_plates, parse_camera_tilt,
-                         parse_flips, parse_pose_prior, parse_view_values, read_dims)
+                     add_perspective_argument, add_pose_prior_arguments, check_output,
+                     open_plates, parse_init_options, parse_view_values)
 from ..errors import ZoopraxisError
 from ..progress import ConsoleProgress
 
@@ -98,14 +97,9 @@ def main(argv):
         raise ZoopraxisError("--refine-body works with --tracker differential only")
     if args.refine_body and cameras is None:
         raise ZoopraxisError("--refine-body needs --calibration (calibrated views)")
-    flips = parse_flips(args.flip)
-    camera_tilt = parse_camera_tilt(args.camera_tilt)
-    check_uncalibrated_options(args, cameras is not None)
-    pose_prior = parse_pose_prior(args, args.template)
-    dims = read_dims(args.dims_from, args.template) if args.dims_from else None
+    init_options = parse_init_options(args, cameras is not None)
     stop = _StopOnInterrupt()
-    kwargs = dict(frames=frames, offsets=offsets, template=args.template, flips=flips,
-                  pose_prior=pose_prior, dims=dims,
+    kwargs = dict(frames=frames, offsets=offsets, init_options=init_options,
                   max_size=args.max_size, progress=ConsoleProgress("track"), cancel=stop,
                   log=lambda msg: print(f"track: {msg}", flush=True))
     t0 = time.perf_counter()
@@ -118,8 +112,7 @@ def main(argv):
             from ..take.track import default_workers, track
 
             workers = args.workers or default_workers()
-            result = track(opened, anchors, cameras, workers=workers, camera_tilt=camera_tilt,
-                           perspective=args.perspective, **kwargs)
+            result = track(opened, anchors, cameras, workers=workers, **kwargs)
         else:
             from ..take.track import track_filter
 

@@ -18,7 +18,7 @@ import numpy as np
 
 from ..body.body import DEFAULT_DIMS, LENGTH_DIMS
 from ..errors import ZoopraxisError
-from ..initialize.fit import DIMS_PRIOR_SIGMA
+from ..initialize.problem import DIMS_PRIOR_SIGMA
 
 DEFAULT_PROPORTIONS_PRIOR = Path(__file__).resolve().parent / "data" / "proportions_prior.npz"
 # A length's relative spread across performers is taken as at least this: a dozen performers

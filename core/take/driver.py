@@ -231,7 +231,7 @@ def run_take(stepper, plates, cameras, init, views, offsets, frames, inside, *, 
     plates : dict of str to Plate
     cameras : dict of str to camera or None
         Calibrated mode when given; uncalibrated otherwise.
-    init : Initial
+    init : InitResult
         The anchors' poses.
     views, offsets, frames, inside
         From :func:`check_take`.

@@ -452,9 +452,8 @@ def _sample_frames(result, n):
 
 
 def finetune(plates, anchors, cameras, *, result=None, init=None, frames=None, offsets=None,
-             template="full", settings=None, max_size=960, backgrounds=None, samples=12,
-             iterations=10, progress=None, cancel=None, log=None, flips=None,
-             pose_prior="default", dims=None):
+             settings=None, max_size=960, backgrounds=None, samples=12, iterations=10,
+             progress=None, cancel=None, log=None, init_options=None):
     """Track, refine the body's lengths on the images of the whole take, track again (§2.7).
 
     Parameters
@@ -466,9 +465,9 @@ def finetune(plates, anchors, cameras, *, result=None, init=None, frames=None, o
     result : TrackResult, optional
         A first track of these plates (its ``body`` must be ``init.body``); tracked here when
         not given.
-    init : track.Initial, optional
+    init : InitResult, optional
         Starting poses and body; by default fitted to the anchors' clicks.
-    frames, offsets, template, settings, max_size
+    frames, offsets, settings, max_size
         As for :func:`track.track`.
     backgrounds : dict of str to BackgroundModel or array, optional
         Known backgrounds (clean plates, BGR) per view; by default estimated from the plates
@@ -483,12 +482,11 @@ def finetune(plates, anchors, cameras, *, result=None, init=None, frames=None, o
         On cancel the work done is kept: the first track (partial or whole) if the cancel came
         before the re-track finished.
     log : callable(str), optional
-    flips, pose_prior : optional
-        When ``init`` is not given, for anchor frames clicked in one view: the body parts
-        turned to their other depth and the pose prior (:func:`initialize.initialize`).
-    dims : dict, optional
-        When ``init`` is not given: the performer's body lengths, kept instead of fitted to
-        the clicks (the refinement still refines them).
+    init_options : InitOptions, optional
+        How the anchors are initialized from their clicks when ``init`` is not given, and
+        again for the refined body (with its lengths kept); default ``InitOptions()``. Given
+        lengths (``dims``) are kept by the first initialization; the refinement still refines
+        them.
 
     Returns
     -------
@@ -499,10 +497,14 @@ def finetune(plates, anchors, cameras, *, result=None, init=None, frames=None, o
     ZoopraxisError
         No calibration, a view without a camera, bad anchors or frames (as :func:`track.track`).
     """
+    from dataclasses import replace
+
     from . import track as T
+    from ..files.initfile import InitResult
+    from ..initialize.options import InitOptions
+    from ..initialize.run import initialize_take
     from .driver import FrameSource
     from ..trackers.differential import Settings
-    from ..initialize.fit import initialize
 
     lines = []
 
@@ -520,18 +522,14 @@ def finetune(plates, anchors, cameras, *, result=None, init=None, frames=None, o
                              f"'{missing[0]}'")
     offsets = dict(offsets or {})
     settings = settings or Settings()
+    init_options = init_options or InitOptions()
     from ..imaging.plates import check_same_length
 
     n_total = check_same_length(plates, offsets)
     frames = range(0, n_total) if frames is None else frames
     inside = [a for a in anchors if frames.start <= a.frame < frames.stop]
     if init is None and inside:
-        res = initialize(inside, {v: cameras[v] for v in views}, template=template,
-                         calibrated=True, views=views, flips=flips, pose_prior=pose_prior,
-                         dims=dims, fit_dims=not dims)
-        for note in res.flip_notes():
-            say(note)
-        init = T.Initial(res.body, res.poses, res.cameras, None, list(res.warnings))
+        init = initialize_take(inside, views, plates, cameras, init_options, say)
     # Progress over the whole job: a track's steps, the fit's steps, the re-track's steps.
     stage = {"base": 0, "steps": None}
 
@@ -543,8 +541,8 @@ def finetune(plates, anchors, cameras, *, result=None, init=None, frames=None, o
 
     def track_once(start):
         return T.track(plates, anchors, cameras, frames=frames, offsets=offsets,
-                       template=template, settings=settings, init=start, max_size=max_size,
-                       progress=staged, cancel=cancel, log=log)
+                       settings=settings, init=start, max_size=max_size, progress=staged,
+                       cancel=cancel, log=log, init_options=init_options)
 
     first = result if result is not None else track_once(init)
     body0 = init.body
@@ -606,9 +604,9 @@ def finetune(plates, anchors, cameras, *, result=None, init=None, frames=None, o
         return finish(first, None, body1, False, fit=fit, cancelled=True)
     # The anchors' poses for the new body: the fit's, or the clicks fitted again with the
     # lengths held, whichever lies nearer the clicks.
-    again = initialize(inside, {v: cameras[v] for v in views}, template=body1.template,
-                       calibrated=True, dims=body1.dims, fit_dims=False, views=views,
-                       flips=flips, pose_prior=pose_prior)
+    again = initialize_take(inside, views, plates, cameras,
+                            replace(init_options, template=body1.template, dims=body1.dims,
+                                    fit_dims=False))
     refined = dict(zip(picked, fit.poses))
 
     def click_rms(pose, anchor):
@@ -616,9 +614,9 @@ def finetune(plates, anchors, cameras, *, result=None, init=None, frames=None, o
         err = [np.linalg.norm(cameras[v].project(X) - anchor.array(v), axis=1) for v in views]
         return float(np.sqrt(np.nanmean(np.concatenate(err) ** 2)))
 
-    start = T.Initial(body1, {a.frame: min((refined[a.frame], again.poses[a.frame]),
-                                           key=lambda p, a=a: click_rms(p, a))
-                              for a in inside}, dict(cameras), None, [])
+    start = InitResult(body1, {a.frame: min((refined[a.frame], again.poses[a.frame]),
+                                            key=lambda p, a=a: click_rms(p, a))
+                               for a in inside}, dict(cameras))
     stage["base"] = stage["steps"] + iterations
     second = track_once(start)
     if second.extra.get("cancelled"):

@@ -7,10 +7,8 @@ coarse search of the hybrid). Each fits the anchors' poses to the markers
 through the one driver (:func:`take.driver.run_take`) with its tracker's stepper.
 """
 
-from dataclasses import dataclass, field
-
 from ..errors import ZoopraxisError
-from ..initialize.fit import CAMERA_TILT_DEG
+from ..initialize.options import InitOptions
 from ..trackers.filter_stepper import ParticleStepper
 from ..trackers.hybrid import HybridStepper
 from ..trackers.stepper import DifferentialStepper
@@ -21,33 +19,9 @@ from .workers import default_workers
 FILTER_TRACKERS = {"particle": ParticleStepper, "hybrid": HybridStepper}
 
 
-@dataclass
-class Initial:
-    """Poses the tracker starts from: what :func:`initialize.initialize` returns.
-
-    Attributes
-    ----------
-    body : BodyModel
-    poses : dict of int to Pose
-        Pose per anchor frame (world; body-centred when uncalibrated).
-    cameras : dict of str to camera
-        Calibrated: the plates' cameras. Uncalibrated: fitted scaled-orthographic cameras.
-    view_cameras : dict of int to dict of str to camera, optional
-        Uncalibrated: the fitted camera of every view at every anchor frame.
-    warnings : list of str
-    """
-
-    body: object
-    poses: dict
-    cameras: dict
-    view_cameras: dict = None
-    warnings: list = field(default_factory=list)
-
-
-def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template="full",
-          settings=None, init=None, max_size=960, progress=None, cancel=None, log=None,
-          workers=1, blend_reach=BLEND_REACH, flips=None, camera_tilt=CAMERA_TILT_DEG,
-          pose_prior="default", dims=None, perspective=False):
+def track(plates, anchors, cameras=None, *, frames=None, offsets=None, settings=None,
+          init=None, max_size=960, progress=None, cancel=None, log=None, workers=1,
+          blend_reach=BLEND_REACH, init_options=None):
     """Track a take with the differential tracker.
 
     Parameters
@@ -61,8 +35,9 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
         Take frames to track (default: all frames the plates share).
     offsets : dict of str to int, optional
         Per-view plate frame offset (take frame f is plate frame f + offset).
-    init : Initial, optional
-        Starting poses; by default fitted to the markers with :func:`initialize.initialize`.
+    init : InitResult, optional
+        Starting poses; by default fitted to the markers (:func:`initialize.run.initialize_take`
+        with ``init_options``).
     progress : callable(done, total), optional
     cancel : callable() -> bool, optional
         Polled once a frame; on cancel the frames already tracked are returned.
@@ -73,54 +48,33 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, template=
     blend_reach : int or None
         Between two anchors, how many frames past the middle each pass tracks at first
         (:data:`BLEND_REACH`); None tracks both passes from anchor to anchor.
-    flips : dict of int to list of str, optional
-        Body parts to turn to their other depth at anchor frames clicked in one view
-        (:func:`initialize.initialize`), when ``init`` is not given.
-    camera_tilt : (float, float) or None
-        Uncalibrated, when ``init`` is not given: how far the camera of an anchor frame
-        clicked in one view looks down at the subject, give or take how much (degrees;
-        :func:`initialize.initialize`).
-    pose_prior : PosePrior, "default", path or None
-        When ``init`` is not given: the pose prior of anchor frames clicked in one view
-        (:func:`initialize.initialize`).
-    dims : dict, optional
-        When ``init`` is not given: the performer's body lengths, kept instead of fitted.
-    perspective : bool
-        Uncalibrated, when ``init`` is not given: fit each view's perspective (views near the
-        body; :func:`initialize.initialize`) and track through it.
+    init_options : InitOptions, optional
+        How to initialize from the markers when ``init`` is not given (template, flips, pose
+        prior, body lengths, camera tilt, perspective); default ``InitOptions()``. The
+        perspective fitted to uncalibrated views is tracked through.
 
     Returns
     -------
     TrackResult
     """
     views, offsets, frames, inside = check_take(plates, anchors, cameras, frames, offsets)
-    calibrated = cameras is not None
     log = log or (lambda msg: None)
 
     if init is None:
-        from ..initialize.fit import initialize
+        from ..initialize.run import initialize_take
 
-        res = initialize(inside, {v: cameras[v] if calibrated else tuple(plates[v].image_size)
-                                  for v in views},
-                         template=template, calibrated=calibrated, views=views, flips=flips,
-                         camera_tilt=camera_tilt, pose_prior=pose_prior, dims=dims,
-                         fit_dims=not dims, perspective=perspective)
-        for note in res.flip_notes() + ([res.distance_note()] if perspective else []):
-            log(note)
-        for note in res.notes:
-            log(f"note: {note}")
-        init = Initial(res.body, res.poses, res.cameras, getattr(res, "view_cameras", None),
-                       list(getattr(res, "warnings", [])))
+        init = initialize_take(inside, views, plates, cameras, init_options or InitOptions(),
+                               log)
     return run_take(DifferentialStepper(settings), plates, cameras, init, views, offsets, frames,
                     inside, max_size=max_size, progress=progress, cancel=cancel, log=log,
                     workers=workers, blend_reach=blend_reach)
 
 
 def track_filter(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, seed=2345,
-                 frames=None, offsets=None, template="full", max_size=960, progress=None,
-                 cancel=None, log=None, init=None, settings=None, prior="smooth",
-                 recentre=None, prior_scale=None, layers=None, silhouette=None,
-                 blend_reach=BLEND_REACH, flips=None, pose_prior="default", dims=None):
+                 frames=None, offsets=None, max_size=960, progress=None, cancel=None,
+                 log=None, init=None, settings=None, prior="smooth", recentre=None,
+                 prior_scale=None, layers=None, silhouette=None, blend_reach=BLEND_REACH,
+                 init_options=None):
     """Track a take with the particle filter, alone or as the coarse stage of the hybrid.
 
     Parameters
@@ -139,10 +93,12 @@ def track_filter(plates, anchors, cameras=None, *, tracker="hybrid", particles=2
         :data:`trackers.hybrid.RECENTRE`).
     frames, offsets, max_size, progress, cancel, log, blend_reach
         As :func:`track`.
-    init : Initial, optional
-        Starting poses; by default fitted to the markers with :func:`initialize.initialize`.
-    template, flips, pose_prior, dims : optional
-        When ``init`` is not given: the initialization's (:func:`track`).
+    init : InitResult, optional
+        Starting poses; by default fitted to the markers (:func:`initialize.run.initialize_take`
+        with ``init_options``).
+    init_options : InitOptions, optional
+        As :func:`track` (calibrated views: the camera tilt does not apply, perspective is
+        refused).
 
     Returns
     -------
@@ -170,17 +126,13 @@ def track_filter(plates, anchors, cameras=None, *, tracker="hybrid", particles=2
                                  "camera")
     log = log or (lambda msg: None)
     if init is None:
-        from ..initialize.fit import initialize
+        from ..initialize.run import initialize_take
 
-        res = initialize(inside, {v: cameras[v] for v in views}, template=template,
-                         calibrated=True, views=views, flips=flips, pose_prior=pose_prior,
-                         dims=dims, fit_dims=not dims)
-        for note in res.flip_notes():
-            log(note)
-        init = Initial(res.body, res.poses, res.cameras, None, list(getattr(res, "warnings", [])))
+        init = initialize_take(inside, views, plates, cameras, init_options or InitOptions(),
+                               log)
     return run_take(stepper, plates, cameras, init, views, offsets, frames, inside,
                     max_size=max_size, progress=progress, cancel=cancel, log=log,
                     blend_reach=blend_reach)
 
 
-__all__ = ["track", "track_filter", "Initial", "default_workers", "FILTER_TRACKERS"]
+__all__ = ["track", "track_filter", "default_workers", "FILTER_TRACKERS"]

@@ -227,6 +227,7 @@ def test_track_operator_with_injected_worker(blender, monkeypatch, tmp_path):
 def test_initialize_operator_with_injected_worker(blender, monkeypatch):
     from zoopraxis.addon import pipeline
     from zoopraxis.core.body.body import make_body
+    from zoopraxis.core.files.initfile import InitResult
 
     settings = load_sample()
     bpy.ops.zoopraxis.load_calibration(filepath=str(SAMPLE / "calibration.json"))
@@ -235,20 +236,15 @@ def test_initialize_operator_with_injected_worker(blender, monkeypatch):
     from zoopraxis.core.files.markers import read_markers
 
     full = make_body("full")
-
-    class Init:
-        body = full
-        poses = {a.frame: full.rest_pose(np.eye(4)) for a in read_markers(SAMPLE / "markers.json")}
-        rms = {"cam0": 1.5, "cam1": 2.5}
-        warnings = ["a warning"]
-        notes = ["a note"]
-        calibrated = True
-
+    init = InitResult(full, {a.frame: full.rest_pose(np.eye(4))
+                             for a in read_markers(SAMPLE / "markers.json")}, {},
+                      warnings=["a warning"], rms={"cam0": 1.5, "cam1": 2.5},
+                      notes=["a note"], calibrated=True)
     got = {}
 
     def fake_initialize(take, progress=None, cancel=None):
         got["cameras"] = take.cameras
-        return Init()
+        return init
 
     monkeypatch.setattr(pipeline, "initialize", fake_initialize)
     assert bpy.ops.zoopraxis.initialize() == {'FINISHED'}
@@ -257,7 +253,7 @@ def test_initialize_operator_with_injected_worker(blender, monkeypatch):
     assert settings.init_notes.split("\n") == ["a warning", "note: a note"]
     assert settings.armature.name == "Zoopraxis init"
     take = pipeline.gather(blender)
-    assert isinstance(pipeline.initial_for(blender.scene, take), Init)
+    assert pipeline.initial_for(blender.scene, take) is init
     take.close()
 
 
@@ -463,7 +459,7 @@ def test_one_view_flips_in_depth_from_the_panel(blender):
     click undoes it."""
     from zoopraxis.addon import pipeline
     from zoopraxis.addon.panels import _draw_init_notes
-    from zoopraxis.core.initialize.fit import ONE_VIEW_LENGTHS_NOTE
+    from zoopraxis.core.initialize.run import ONE_VIEW_LENGTHS_NOTE
 
     settings = load_sample(("cam0",))
     bpy.ops.zoopraxis.import_markers(filepath=str(SAMPLE / "markers.json"))
@@ -484,7 +480,7 @@ def test_one_view_flips_in_depth_from_the_panel(blender):
     assert bpy.ops.zoopraxis.flip_depth(frame=0, part="left leg") == {'FINISHED'}
     assert settings.depth_flips == "0:left leg"
     take = pipeline.gather(blender)
-    assert take.flips == {0: ["left leg"]}
+    assert take.init_options.flips == {0: ["left leg"]}
     after = pipeline.initial_for(blender.scene, take)
     take.close()
     assert after is not None and after is not before
@@ -559,19 +555,20 @@ def test_pose_prior_file_from_the_panel(blender, tmp_path):
     starts."""
     import json
 
-    from zoopraxis.core.initialize import fit as init
+    from zoopraxis.core.geometry.triangulate import procrustes_mpjpe
+    from zoopraxis.core.priors.pose import PosePrior, take_angles
 
     truth = json.loads((SAMPLE / "truth.json").read_text())
     X = np.array(truth["joints3d"][truth["frames"].index(47)])
     prior = tmp_path / "self.npz"
-    angles, _ = init.take_angles(np.array(truth["joints3d"]))
-    init.PosePrior.from_takes({"walk3": angles}).save(prior)
+    angles, _ = take_angles(np.array(truth["joints3d"]))
+    PosePrior.from_takes({"walk3": angles}).save(prior)
 
     def error_at_47():
         fitted = remembered_initialization(blender)
         if fitted is None:
             return None
-        return 1000 * init.procrustes_mpjpe(fitted.body.joints(fitted.poses[47]), X)
+        return 1000 * procrustes_mpjpe(fitted.body.joints(fitted.poses[47]), X)
 
     settings = load_sample(("cam2",))
     bpy.ops.zoopraxis.import_markers(filepath=str(SAMPLE / "markers.json"))
@@ -637,7 +634,7 @@ def test_near_cameras_from_the_panel(blender, monkeypatch):
 
     from zoopraxis.addon import pipeline
     from zoopraxis.addon.panels import VIEW3D_PT_zoopraxis
-    from zoopraxis.core.initialize import fit as core_init
+    from zoopraxis.core.initialize import run as core_init
 
     def drawn():
         log = []

@@ -92,7 +92,7 @@ def test_track_one_near_view_through_its_perspective(take, tmp_path):
     of four takes was): with the shipped prior of 80 takes the perspective is fitted as 111 m
     (53 mm either way), with one of 131's other walks as far."""
     from tests.conftest import shared_data_dir
-    from zoopraxis.core.initialize.fit import procrustes_mpjpe
+    from zoopraxis.core.geometry.triangulate import procrustes_mpjpe
 
     marks = json.loads((take / "markers.json").read_text())
     for anchor in marks["anchors"]:

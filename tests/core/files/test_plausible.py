@@ -194,7 +194,7 @@ def test_uncalibrated_track_with_a_hidden_view(tmp_path, capsys):
 
 
 def test_initialization_warns_about_a_view_it_cannot_fit(take, tmp_path):
-    from zoopraxis.core.initialize.fit import initialize
+    from zoopraxis.core.initialize.run import initialize
 
     data, anchors = take
     cameras = cameras_of(changed(data, _wild_lens), tmp_path)

@@ -15,7 +15,9 @@ import pytest
 
 from zoopraxis.core.files import calibfile, markers, result
 from zoopraxis.core.commands import common as cli_common
-from zoopraxis.core.initialize import fit as initialize
+from zoopraxis.core.files.initfile import read_init
+from zoopraxis.core.priors import pose as pose_prior
+from zoopraxis.core.priors.pose import resolve_pose_prior
 from zoopraxis.core.body.body import DEFAULT_DIMS, make_body
 from zoopraxis.core.errors import ZoopraxisError
 from zoopraxis.core.files.inputs import read_json
@@ -157,8 +159,8 @@ def test_init_reader_fuzzed(tmp_path):
     good = good_init()
     path = tmp_path / "init.json"
     path.write_text(json.dumps(good))
-    assert list(initialize.read_init(path).poses) == [0]
-    fuzz(initialize.read_init, good, tmp_path, 2349, name="init.json")
+    assert list(read_init(path).poses) == [0]
+    fuzz(read_init, good, tmp_path, 2349, name="init.json")
 
 
 def test_dims_reader_fuzzed(tmp_path):
@@ -174,27 +176,27 @@ def test_pose_prior_reader_fuzzed(tmp_path):
                         takes=np.array(["a"] * 4), dof_names=np.array(dof_names),
                         template=np.array("full"))
     raw = good.read_bytes()
-    assert initialize.resolve_pose_prior(str(good), "full") is not None
+    assert resolve_pose_prior(str(good), "full") is not None
     bad = tmp_path / "p.npz"
     blobs = [rng.bytes(3000), b"", b"PK\x03\x04" + rng.bytes(300)]
     blobs += [raw[:cut] for cut in rng.integers(1, len(raw), 12)]
     for blob in blobs:
         bad.write_bytes(blob)
-        initialize._PRIOR_FILES.clear()
-        assert_one_line_or_ok(lambda p: initialize.resolve_pose_prior(str(p), "full"), bad)
+        pose_prior._PRIOR_FILES.clear()
+        assert_one_line_or_ok(lambda p: resolve_pose_prior(str(p), "full"), bad)
     with zipfile.ZipFile(bad, "w") as archive:                 # an npz of wrong arrays
         archive.writestr("angles.npy", b"junk")
     with pytest.raises(ZoopraxisError, match="p.npz: not a pose prior file"):
-        initialize.resolve_pose_prior(str(bad), "full")
+        resolve_pose_prior(str(bad), "full")
     nan = tmp_path / "nan.npz"
     np.savez_compressed(nan, angles=np.full((4, len(dof_names)), np.nan), takes=np.array(["a"] * 4),
                         dof_names=np.array(dof_names), template=np.array("full"))
     with pytest.raises(ZoopraxisError, match="nan.npz: not a pose prior file"):
-        initialize.resolve_pose_prior(str(nan), "full")
+        resolve_pose_prior(str(nan), "full")
 
 
 @pytest.mark.parametrize("reader", [markers.read_markers, result.read_result,
-                                    calibfile.read_calibration, initialize.read_init,
+                                    calibfile.read_calibration, read_init,
                                     lambda p: cli_common.read_dims(p, "full")])
 def test_readers_refuse_pipes_and_folders_without_opening(tmp_path, reader):
     pipe = tmp_path / "pipe.json"

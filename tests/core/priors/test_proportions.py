@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from zoopraxis.core.body import body as bm
-from zoopraxis.core.initialize import fit as init
+from zoopraxis.core.initialize.problem import DIMS_PRIOR_SIGMA
+from zoopraxis.core.initialize.run import initialize
 from zoopraxis.core.synthetic import synth
 from zoopraxis.core.errors import ZoopraxisError
 from zoopraxis.core.files.markers import Anchor
@@ -33,7 +34,7 @@ class TestMeanSigma:
         mean, sigma = performers(shape, [0.9, 1.0, 1.1, 1.2], rng).mean_sigma()
         np.testing.assert_allclose(mean / TEMPLATE, shape, rtol=1e-9)
         assert np.all(sigma[np.arange(len(sigma)) != K["ankle_height"]] == MIN_SIGMA)
-        assert sigma[K["ankle_height"]] == init.DIMS_PRIOR_SIGMA     # not measured
+        assert sigma[K["ankle_height"]] == DIMS_PRIOR_SIGMA     # not measured
 
     def test_spread_across_performers(self, rng):
         prior = performers(np.ones(len(TEMPLATE)), np.linspace(0.9, 1.1, 40), rng, spread=0.08)
@@ -79,7 +80,7 @@ def test_one_view_lengths_follow_the_proportions_prior(rng):
         STANDARD_JOINTS, cam.project(X) + rng.normal(0, 1.0, (17, 2)))}}
     errors = {}
     for label, proportions in (("template", None), ("learned", prior)):
-        result = init.initialize([Anchor(0, clicked)], {cam.name: cam}, calibrated=False,
+        result = initialize([Anchor(0, clicked)], {cam.name: cam}, calibrated=False,
                                  pose_prior=None, proportions=proportions)
         fitted = np.array([result.body.dims[n] for n in bm.LENGTH_DIMS])
         ratio = fitted / (TEMPLATE * shape)

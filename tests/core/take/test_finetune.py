@@ -10,7 +10,8 @@ from zoopraxis.core.take import track as T
 from zoopraxis.core.body.body import make_body
 from zoopraxis.core.geometry.camera import ring_of_cameras
 from zoopraxis.core.errors import ZoopraxisError
-from zoopraxis.core.initialize.fit import initialize
+from zoopraxis.core.files.initfile import InitResult
+from zoopraxis.core.initialize.run import initialize
 from zoopraxis.core.body.joints import STANDARD_JOINTS
 from zoopraxis.core.files.markers import Anchor
 from zoopraxis.core.imaging.render import render
@@ -78,7 +79,7 @@ def test_finetune_brings_the_limbs_closer_and_the_track_no_worse(take):
     scene, joints, truth, wrong, start, cams, anchors, clean = take
     lines, calls = [], []
     out = FT.finetune(synth.scene_plates(scene), anchors, cams, backgrounds=clean,
-                      init=T.Initial(wrong, {0: start}, cams), log=lines.append,
+                      init=InitResult(wrong, {0: start}, cams), log=lines.append,
                       progress=lambda d, t: calls.append((d, t)))
     before = np.abs(limb_errors(out.body_before, truth))
     after = np.abs(limb_errors(out.body_after, truth))
@@ -116,7 +117,7 @@ def test_cancel_keeps_what_was_tracked(take):
         return len(polls) > 3
 
     out = FT.finetune(synth.scene_plates(scene), anchors, cams,
-                      init=T.Initial(wrong, {0: start}, cams), frames=range(0, 6), cancel=cancel)
+                      init=InitResult(wrong, {0: start}, cams), frames=range(0, 6), cancel=cancel)
     assert out.cancelled and not out.kept and out.retrack is None
     assert out.result is out.first and out.result.extra["cancelled"]
     assert 1 <= out.result.num_frames < 6

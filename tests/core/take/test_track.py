@@ -6,6 +6,7 @@ import pytest
 from zoopraxis.core.body import fit3d
 from zoopraxis.core.geometry import se3
 from zoopraxis.core.synthetic import synth
+from zoopraxis.core.files.initfile import InitResult
 from zoopraxis.core.take import track as T
 from zoopraxis.core.take import backgrounds as BG
 from zoopraxis.core.trackers import differential as D
@@ -44,7 +45,7 @@ def anchors_at(scene, joints, frames):
 def run(take, anchor_frames=(0,), **kw):
     scene, joints, body, poses = take
     cams = {c.name: c for c in scene.cameras}
-    init = T.Initial(body, {f: poses[f] for f in anchor_frames}, cams)
+    init = InitResult(body, {f: poses[f] for f in anchor_frames}, cams)
     return T.track(synth.scene_plates(scene), anchors_at(scene, joints, anchor_frames), cams,
                    init=init, **kw)
 
@@ -174,7 +175,7 @@ def test_passes_in_worker_processes_give_the_same_track(take, monkeypatch):
     cams = {c.name: c for c in scene.cameras}
     frozen = {k: FrozenPlate(p) for k, p in synth.scene_plates(scene).items()}
     anchors = anchors_at(scene, joints, (0, 3, 6))
-    init = T.Initial(body, {f: poses[f] for f in (0, 3, 6)}, cams)
+    init = InitResult(body, {f: poses[f] for f in (0, 3, 6)}, cams)
     parent = os.getpid()
     measured_here = []
     measure = S.silhouette_measures
@@ -257,7 +258,7 @@ def test_uncalibrated_single_view(take):
     t = cam.R @ body2world[:3, 3] + cam.t
     ortho = ScaledOrthoCamera(cam.name, cam.image_size, s=cam.K[0, 0] / depth, R=R, t=t,
                               c=cam.K[:2, 2])
-    init = T.Initial(body, {0: Pose(np.eye(4), pose.angles.copy())}, {cam.name: ortho})
+    init = InitResult(body, {0: Pose(np.eye(4), pose.angles.copy())}, {cam.name: ortho})
     plates = {cam.name: synth.ScenePlate(scene, 0)}
     anchor = anchors_at(scene, joints, [0])[0]
     anchor.views = {cam.name: anchor.views[cam.name]}
@@ -296,7 +297,7 @@ def test_uncalibrated_near_view_tracks_through_its_perspective(take):
     px = {}
     for kind in (0, 1):
         per_frame = {f: {cam.name: _near_camera(cam, poses[f])[kind]} for f in (0, N - 1)}
-        init = T.Initial(body, {f: Pose(np.eye(4), poses[f].angles.copy()) for f in (0, N - 1)},
+        init = InitResult(body, {f: Pose(np.eye(4), poses[f].angles.copy()) for f in (0, N - 1)},
                          per_frame[0], per_frame)
         res = T.track(plates, anchors, None, init=init, blend_reach=None)
         px[kind] = np.linalg.norm(res.joints2d[cam.name] - cam.project(joints), axis=2)
@@ -313,7 +314,7 @@ def test_bad_input(take):
     cams = {c.name: c for c in scene.cameras}
     plates = synth.scene_plates(scene)
     anchors = anchors_at(scene, joints, [0])
-    init = T.Initial(body, {0: poses[0]}, cams)
+    init = InitResult(body, {0: poses[0]}, cams)
     with pytest.raises(ZoopraxisError, match="no camera for view 'cam1'"):
         T.track(plates, anchors, {"cam0": cams["cam0"]}, init=init)
     with pytest.raises(ZoopraxisError, match="outside the take"):
@@ -438,7 +439,7 @@ def test_a_pass_goes_on_where_its_partner_lost_the_body(take, monkeypatch):
     cams = {c.name: c for c in scene.cameras}
     frozen = {k: FrozenPlate(p) for k, p in synth.scene_plates(scene).items()}
     anchors = anchors_at(scene, joints, (0, N - 1))
-    init = T.Initial(body, {f: poses[f] for f in (0, N - 1)}, cams)
+    init = InitResult(body, {f: poses[f] for f in (0, N - 1)}, cams)
     full = T.track(frozen, anchors, cams, init=init, blend_reach=None)
     asked = []
 

@@ -13,6 +13,7 @@ from zoopraxis.core.trackers import hybrid, particle
 from zoopraxis.core.geometry import se3
 from zoopraxis.core.synthetic import synth
 from zoopraxis.core.files import result as result_io
+from zoopraxis.core.files.initfile import InitResult
 from zoopraxis.core.take import driver as DR
 from zoopraxis.core.take import track as T
 from zoopraxis.core.body.body import Pose
@@ -59,7 +60,7 @@ def brisk():
 def run(take, tracker, anchor_frames=(0,), **kw):
     scene, joints, body, poses = take
     cams = {c.name: c for c in scene.cameras}
-    init = T.Initial(body, {f: poses[f] for f in anchor_frames}, cams)
+    init = InitResult(body, {f: poses[f] for f in anchor_frames}, cams)
     plates = synth.scene_plates(scene)
     anchors = anchors_at(scene, joints, anchor_frames)
     if tracker == "differential":
@@ -193,7 +194,7 @@ def test_bad_input(slow):
     cams = {c.name: c for c in scene.cameras}
     plates = synth.scene_plates(scene)
     anchors = anchors_at(scene, joints, [0])
-    init = T.Initial(body, {0: poses[0]}, cams)
+    init = InitResult(body, {0: poses[0]}, cams)
     with pytest.raises(ZoopraxisError, match="hybrid tracker needs a calibration"):
         T.track_filter(plates, anchors, None, init=init)
     with pytest.raises(ZoopraxisError, match="unknown tracker 'kalman'"):

@@ -1,0 +1,258 @@
+"""The uncalibrated fit (Bregler & Malik §2.3): a scaled orthographic camera per view and
+anchor frame, the body root at the identity, started from the body turned every 45 degrees and
+from the pose prior's own poses."""
+
+import numpy as np
+
+from ..geometry import se3
+from ..geometry.camera import ScaledOrthoCamera
+from ..geometry.triangulate import similarity_from_points
+from .fit import _Fit
+from .problem import PRIOR_WEIGHT, _fit, _rho_px, _State
+from .starts import _TORSO, _affine_camera, _fit_3d, _ortho_camera
+
+_MIN_VIEW_JOINTS = 4       # an uncalibrated view needs this many clicks to place its camera
+# A frame seen in one view is also searched from the prior's own poses whose projection best
+# matches the clicks (each under its best scaled orthographic camera): this many of them, that
+# differ by at least EXEMPLAR_APART_DEG in some angle, out of at most EXEMPLAR_POOL poses.
+EXEMPLAR_STARTS = 2
+EXEMPLAR_APART_DEG = 20.0
+EXEMPLAR_POOL = 4000
+
+
+class _UncalibratedFit(_Fit):
+    """Uncalibrated views (Bregler & Malik §2.3): a scaled orthographic camera per view and
+    anchor, the body root at the identity, angles shared by the views of a frame."""
+
+    calibrated = False
+
+    dims_prior = None       # (mean, sigma) of the lengths (proportions.ProportionsPrior)
+
+    def __init__(self, kin, obs, weights, sizes, views, anchors, dims0, fit_dims, warnings):
+        super().__init__(kin, obs, weights, views, anchors, dims0, fit_dims, warnings)
+        self.sizes = sizes
+        counts = np.isfinite(obs).all(axis=-1).sum(axis=-1)               # (F, V)
+        self.usable = counts >= _MIN_VIEW_JOINTS
+        for f, v in np.argwhere((counts > 0) & ~self.usable):
+            warnings.append(f"frame {anchors[f].frame}, view {views[v]}: only {counts[f, v]} "
+                            f"joints clicked (need {_MIN_VIEW_JOINTS} to place an uncalibrated "
+                            "view); view left out of this frame")
+            self.weights[f, v] = 0.0
+
+    def options(self, state, f, fit_dims):
+        free = np.array([[c is not None for c in row] for row in state.cameras])
+        options = dict(free_root=False, free_cams=free, fit_dims=fit_dims, calibrated=False,
+                       perspective=self.perspective, dims_prior=self.dims_prior)
+        if self.prior is not None and PRIOR_WEIGHT > 0 and self._prior_in_fit:
+            # Frames seen in one view: the learned prior decides what the clicks leave free.
+            options.update(pose_prior=self.prior, prior_frames=free.sum(axis=1) == 1)
+        if self.tilt is not None:
+            options.update(tilt=self.tilt, tilt_frames=free.sum(axis=1) == 1)
+        return options
+
+    _prior_in_fit = True
+
+    def _frame(self, f):
+        """As :meth:`_Fit._frame`; a frame seen in one view is searched twice, with the learned
+        prior in the fit and without it (the everyday-pose Gaussian instead), and the second
+        result is fitted again with the prior. The lower score (clicks and learned prior) wins.
+
+        The prior pulls each local fit towards the captures' poses, which can lead the search
+        of depth signs into a wrong basin for poses unlike them; the search without it finds
+        the basin the clicks favour, and the final score compares both on the same terms.
+        """
+        if self.prior is None or PRIOR_WEIGHT <= 0 or self.usable[f].sum() != 1:
+            return super()._frame(f)
+        kept, ambiguous = len(self.warnings), self.ambiguous
+        frame = self.frames[f]
+        parts = list(self.ambiguous_parts.get(frame, []))
+        found = []
+        searches = [(True, None), (False, None)] + [(True, s) for s in self._exemplars(f)]
+        for in_fit, start in searches:
+            self._prior_in_fit, self.ambiguous = in_fit, ambiguous
+            self._start = start
+            self.ambiguous_parts[frame] = list(parts)
+            try:
+                state = super()._frame(f)
+            finally:
+                self._prior_in_fit, self._start = True, None
+            if not in_fit:
+                state, _, _ = _fit(self.kin, self.obs[f:f + 1], self.weights[f:f + 1], state,
+                                   **self.options(state, f, fit_dims=self.fit_dims))
+            found.append((float(self._score(state, f, state.angles)[0]), len(found), state,
+                          self.warnings[kept:], self.ambiguous, self.ambiguous_parts[frame]))
+            del self.warnings[kept:]
+        _, _, state, notes, self.ambiguous, chosen = min(found, key=lambda t: t[:2])
+        self.warnings += notes
+        if chosen:
+            self.ambiguous_parts[frame] = chosen
+        else:
+            self.ambiguous_parts.pop(frame, None)
+        return state
+
+    _start = None       # a start of _frame's search other than the body turns
+    _pool = None        # _exemplars' (prior poses, their joints at the starting lengths)
+
+    def start(self, f):
+        """Best single-view fit over body turns, then each other view's camera alone."""
+        if self._start is not None:
+            return self._start.copy()
+        return self._starts(f, 2)[0]
+
+    def _exemplars(self, f):
+        """Starts for a frame seen in one view from the learned prior's own poses: the
+        EXEMPLAR_STARTS poses (at the starting lengths) whose joints, under the scaled
+        orthographic camera nearest to their best affine camera, fall nearest to the clicks
+        (robust cost), apart from each other by EXEMPLAR_APART_DEG in some angle.
+
+        The body turns and the limbs' depth signs reach the poses near the everyday mean; a
+        pose of the captures far from it (a deep lunge, an arm across the body) is found from
+        the nearest captured pose instead.
+        """
+        if EXEMPLAR_STARTS <= 0 or len(self.prior.samples) == 0:
+            return []
+        v = int(np.flatnonzero(self.usable[f])[0])
+        uv = self.obs[f, v]
+        seen = np.isfinite(uv).all(axis=-1) & (self.weights[f, v] > 0)
+        if self._pool is None:      # the prior's poses at the starting lengths, once a fit
+            samples = self.prior.samples
+            if len(samples) > EXEMPLAR_POOL:
+                samples = samples[np.linspace(0, len(samples) - 1, EXEMPLAR_POOL).astype(int)]
+            self._pool = samples, np.concatenate(
+                [self.kin.forward(chunk, self.dims0)[0]
+                 for chunk in np.array_split(samples, -(-len(samples) // 500))])
+        samples, Y = self._pool
+        Ys = Y[:, seen]                                                        # (N, m, 3)
+        Yc = Ys - Ys.mean(axis=1, keepdims=True)
+        target = uv[seen] - uv[seen].mean(axis=0)                              # (m, 2)
+        # The best affine camera of each pose, then the scaled rotation nearest to it.
+        G = np.swapaxes(Yc, 1, 2) @ Yc + 1e-9 * np.eye(3)
+        A = np.swapaxes(np.linalg.solve(G, np.swapaxes(Yc, 1, 2) @ target), 1, 2)  # (N, 2, 3)
+        U, S, Vt = np.linalg.svd(A, full_matrices=False)
+        rows = U @ Vt                                                          # (N, 2, 3)
+        scale = S.mean(axis=1)
+        err = np.linalg.norm(scale[:, None, None] * (Yc @ np.swapaxes(rows, 1, 2)) - target,
+                             axis=-1)
+        cost = np.sum(_rho_px(err), axis=1)
+        picked = []
+        for _ in range(EXEMPLAR_STARTS):
+            if not np.isfinite(cost).any():
+                break
+            i = int(np.argmin(cost))
+            picked.append(i)
+            near = np.abs(samples - samples[i]).max(axis=1) < np.radians(EXEMPLAR_APART_DEG)
+            cost = np.where(near, np.inf, cost)
+        size = self.sizes[v]
+        centre = ((size[0] - 1) / 2, (size[1] - 1) / 2)
+        starts = []
+        for i in picked:
+            R = np.vstack([rows[i], np.cross(rows[i][0], rows[i][1])])
+            shift = (uv[seen].mean(axis=0) - centre) / scale[i] - R[:2] @ Ys[i].mean(axis=0)
+            cams = [None] * len(self.views)
+            cams[v] = ScaledOrthoCamera(self.views[v], size, float(scale[i]), R=R,
+                                        t=[shift[0], shift[1], 10.0], c=centre)
+            angles = np.clip(samples[i], self.kin.lower, self.kin.upper)
+            starts.append(_State(self.dims0.copy(), 1.0, np.eye(4)[None], angles[None], [cams]))
+        return starts
+
+    def _starts(self, f, keep):
+        """Single-view fits from the ``keep`` best body turns, best first, each with the other
+        views' cameras placed."""
+        kin = self.kin
+        obs, w = self.obs[f:f + 1], self.weights[f:f + 1]
+        views = list(np.flatnonzero(self.usable[f]))
+        counts = np.isfinite(obs[0]).all(axis=-1).sum(axis=-1)
+        views.sort(key=lambda v: -counts[v])
+        angles0 = kin.start_angles()
+        Y = kin.forward(angles0[None], self.dims0)[0][0]
+        first = views[0]
+        only = np.zeros_like(w)
+        only[0, first] = w[0, first]
+        free = np.zeros((1, len(self.views)), bool)
+        free[0, first] = True
+        # The camera alone for the body at rest, turned every 45 degrees, ranks the turns
+        # cheaply; the best few are then fitted with the angles.
+        trials = []
+        for yaw in np.radians(np.arange(0, 360, 45)):
+            cams = [None] * len(self.views)
+            cams[first] = _ortho_camera(self.views[first], self.sizes[first], obs[0, first], Y,
+                                        yaw)
+            state = _State(self.dims0.copy(), 1.0, np.eye(4)[None], angles0[None].copy(), [cams])
+            trials.append(_fit(kin, obs, only, state, free_root=False, free_angles=False,
+                               fit_dims=False, free_cams=free, calibrated=False,
+                               max_nfev=30)[:2])
+        trials.sort(key=lambda t: t[1])
+        fits = []
+        for state, _ in trials[:keep]:
+            fitted, cost, _ = _fit(kin, obs, only, state, free_root=False, fit_dims=False,
+                                   free_cams=free, calibrated=False, max_nfev=100)
+            fits.append((cost, len(fits), fitted))
+        fits.sort(key=lambda t: t[:2])
+        out = []
+        for _, _, state in fits:
+            Y = kin.forward(state.angles, state.dims)[0][0]
+            for v in views[1:]:
+                state.cameras[0][v] = self._place_camera(state, f, v, Y)
+            out.append(state)
+        return out
+
+    def _place_camera(self, state, f, v, Y):
+        """Camera of view ``v`` alone for a known body: the affine camera of the clicks, made
+        a scaled rotation, then fitted robustly."""
+        obs = self.obs[f:f + 1]
+        only = np.zeros_like(self.weights[f:f + 1])
+        only[0, v] = self.weights[f, v]
+        trial = state.copy()
+        trial.cameras[0][v] = _affine_camera(self.views[v], self.sizes[v], obs[0, v], Y)
+        free = np.zeros((1, len(self.views)), bool)
+        free[0, v] = True
+        fitted, _, _ = _fit(self.kin, obs, only, trial, free_root=False, free_angles=False,
+                            free_cams=free, fit_dims=False, calibrated=False, max_nfev=50)
+        return fitted.cameras[0][v]
+
+    tilt = None     # (mean, sigma): see CAMERA_TILT_DEG and _Problem
+    perspective = False     # the views' perspective (kappa) is fitted: see KAPPA_MAX
+
+    def _tilt_cost(self, state):
+        cams = [c for c in state.cameras[0] if c is not None]
+        if self.tilt is None or len(cams) != 1:
+            return 0.0
+        return 0.5 * ((cams[0].R[2, 2] - self.tilt[0]) / self.tilt[1]) ** 2
+
+    def depth_direction(self, state, f):
+        """For a frame with one usable view: that camera's viewing direction."""
+        views = [v for v in range(len(self.views)) if state.cameras[0][v] is not None]
+        if len(views) != 1:
+            return None
+        forward = state.cameras[0][views[0]].R[2]
+        return lambda p: forward
+
+    def mirrored(self, state, f):
+        """The depth-flipped pose: the joints reflected in the first view's image plane, posed
+        again by inverse kinematics, with every view's camera turned to see the same image."""
+        views = [v for v in range(len(self.views)) if state.cameras[0][v] is not None]
+        n = state.cameras[0][views[0]].R[2]
+        Y = self.kin.forward(state.angles, state.dims)[0][0]
+        M = np.eye(3) - 2.0 * np.outer(n, n)
+        target = Y @ M
+        R, t, _ = similarity_from_points(Y[_TORSO], target[_TORSO], with_scale=False)
+        root, angles, _ = _fit_3d(self.kin, target, state.dims, se3.transform(R, t),
+                                  self.kin.start_angles())
+        out = _State(state.dims.copy(), state.size, np.eye(4)[None], angles[None],
+                     [list(state.cameras[0])])
+        for v in views:
+            cam = state.cameras[0][v]
+            # image = s (R_v Y + t_v)_xy and Y ~ M (R_T Y' + p_T): the new camera keeps the
+            # first two rows of R_v M R_T (any such pair completes to a rotation).
+            rows = cam.R @ M @ root[:3, :3]
+            R_new = np.vstack([rows[:2], np.cross(rows[0], rows[1])])
+            shift = cam.t[:2] + (cam.R @ M @ root[:3, 3])[:2]
+            out.cameras[0][v] = cam.replace(R=R_new, t=[shift[0], shift[1], cam.t[2]])
+        return out
+
+    def _cameras(self, state):
+        view_cameras = {}
+        for f, frame in enumerate(self.frames):
+            view_cameras[frame] = {view: state.cameras[f][v] for v, view in enumerate(self.views)
+                                   if state.cameras[f][v] is not None}
+        return dict(view_cameras[self.frames[0]]), view_cameras
