@@ -1,3 +1,4 @@
-"""Rigid-body and camera geometry: twists and SE(3) (se3), pinhole, distortion and scaled
-orthographic cameras (camera). Imports numpy, scipy, OpenCV and core.errors only.
+"""Rigid-body and camera geometry: twists and SE(3) (se3), the pinhole camera and what both camera
+models share (camera), lens distortion (lens), the scaled orthographic camera (ortho). Imports
+numpy, scipy, OpenCV and core.errors only.
 """

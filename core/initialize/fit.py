@@ -57,7 +57,7 @@ from scipy.optimize import least_squares
 from ..geometry import se3
 from ..body.body import (DEFAULT_DIMS, DIM_NAMES, LENGTH_DIMS, RADIUS_DIMS, Pose, make_body,
                    reference_points)
-from ..geometry.camera import ScaledOrthoCamera
+from ..geometry.ortho import ScaledOrthoCamera
 from ..errors import ZoopraxisError
 from ..body.joints import JOINT_INDEX, STANDARD_JOINTS
 
@@ -1404,7 +1404,7 @@ def init_from_json(data, path="init.json"):
 
 
 def _init_from_json(data, path):
-    from ..geometry.camera import camera_from_dict
+    from ..files.calibfile import camera_from_dict
     from ..files.plausible import check_body_dims
 
     if not isinstance(data, dict) or data.get("format") != "zoopraxis-init/1":

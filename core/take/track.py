@@ -21,7 +21,7 @@ import numpy as np
 from ..geometry import se3
 from ..imaging.background import estimate_background, model_coverage, signed_distance, silhouette_iou
 from ..body.body import Pose
-from ..geometry.camera import ScaledOrthoCamera
+from ..geometry.ortho import ScaledOrthoCamera
 from ..trackers.differential import DifferentialTracker, Settings, State, prepare_images, thread_pool
 from ..errors import ZoopraxisError
 from ..initialize.fit import CAMERA_TILT_DEG

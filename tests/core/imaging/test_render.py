@@ -7,7 +7,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from zoopraxis.core.geometry.camera import PinholeCamera, ScaledOrthoCamera, look_at
+from zoopraxis.core.geometry.camera import PinholeCamera, look_at
+
+from zoopraxis.core.geometry.ortho import ScaledOrthoCamera
 from zoopraxis.core.imaging import render as render_module
 from zoopraxis.core.errors import ZoopraxisError
 from zoopraxis.core.imaging.render import (CYLINDER, ELLIPSOID, Primitives, RenderResult, capsule,

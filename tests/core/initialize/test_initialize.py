@@ -10,7 +10,8 @@ from zoopraxis.core.body import body as bm
 from zoopraxis.core.initialize import fit as init
 from zoopraxis.core.geometry import se3
 from zoopraxis.core.synthetic import synth
-from zoopraxis.core.geometry.camera import ScaledOrthoCamera, ring_of_cameras
+from zoopraxis.core.geometry.camera import ring_of_cameras
+from zoopraxis.core.geometry.ortho import ScaledOrthoCamera
 from zoopraxis.core.errors import ZoopraxisError
 from zoopraxis.core.body.joints import JOINT_INDEX, STANDARD_JOINTS
 from zoopraxis.core.files.markers import Anchor

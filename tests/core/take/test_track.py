@@ -8,7 +8,7 @@ from zoopraxis.core.geometry import se3
 from zoopraxis.core.synthetic import synth
 from zoopraxis.core.take import track as T
 from zoopraxis.core.body.body import Pose
-from zoopraxis.core.geometry.camera import ScaledOrthoCamera
+from zoopraxis.core.geometry.ortho import ScaledOrthoCamera
 from zoopraxis.core.errors import ZoopraxisError
 from zoopraxis.core.body.joints import STANDARD_JOINTS
 from zoopraxis.core.files.markers import Anchor
