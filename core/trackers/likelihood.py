@@ -55,6 +55,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from ..body import primitives
 from ..imaging import render
 from ..errors import ZoopraxisError
 from ..imaging.plates import to_gray_float
@@ -115,7 +116,7 @@ class Occluders:
     ----------
     segment : array of int, shape (O,)
     kind : array of int, shape (O,)
-        ``render.CYLINDER`` or ``render.ELLIPSOID``.
+        ``primitives.CYLINDER`` or ``primitives.ELLIPSOID``.
     ends : array, shape (O, 2, 4)
         The axis end points, homogeneous, in segment reference coordinates (a cylinder's base
         and top; an ellipsoid's capsule along its longest semi-axis).
@@ -140,7 +141,7 @@ class Occluders:
         for p in range(len(prims)):
             T = prims.prim2seg[p]
             size = prims.size[p]
-            if prims.kind[p] == render.CYLINDER:
+            if prims.kind[p] == primitives.CYLINDER:
                 a, b = T[:3, 3], T[:3, 3] + size[2] * T[:3, 2]
                 ax, r, tp = T[:3, :2].T, size[:2], prims.taper[p]
             else:
