@@ -5,7 +5,7 @@
         [--force]
 
 By default every capture under ``../shared/data/cmu_more`` and ``../shared/data/cmu_mocap``
-(every CMU convention, ``bvh.read_take``) is searched for steady forward walking; ``--takes``
+(every CMU convention, ``cmu.read_take``) is searched for steady forward walking; ``--takes``
 names a few instead. ``--hold-out`` leaves whole performers out (leave-subjects-out: the
 benchmarks track subject 131's walk with a prior learned ``--hold-out 131``); ``--exclude``
 leaves takes out, or single cycles, ``TAKE:K`` for the K-th cycle (from 0) found in TAKE
@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from zoopraxis.core.files import bvh
+from zoopraxis.core.files import cmu
 from zoopraxis.core.priors import motion_prior
 from zoopraxis.core.body.body import make_body
 from zoopraxis.core.errors import ZoopraxisError
@@ -78,7 +78,7 @@ def main(argv=None):
     if args.out.exists() and not args.force:
         sys.exit(f"learn_walk_prior: {args.out} exists (use --force to replace it)")
     try:
-        paths = {p.stem: p for p in bvh.capture_paths(*args.data, hold_out=args.hold_out)}
+        paths = {p.stem: p for p in cmu.capture_paths(*args.data, hold_out=args.hold_out)}
     except ZoopraxisError as error:
         sys.exit(f"learn_walk_prior: {error}")
     if args.takes is not None:
@@ -100,7 +100,7 @@ def main(argv=None):
     for name, path in paths.items():
         if None in left_out.get(name, ()):
             continue
-        take = bvh.read_take(path)
+        take = cmu.read_take(path)
         joints = take.joints(FPS)
         found, _ = motion_prior.find_gait_cycles(joints, FPS)
         if left_out.get(name):

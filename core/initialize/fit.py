@@ -314,7 +314,7 @@ class PosePrior:
         if not (np.issubdtype(angles.dtype, np.number) and np.all(np.isfinite(angles))):
             raise ZoopraxisError(f"{path}: not a pose prior file (angles are not finite "
                                  "numbers)")
-        from ..files.bvh import subject_of
+        from ..files.cmu import subject_of
 
         subjects = np.array([subject_of(t) for t in takes])
         keep = ~np.isin(takes, list(exclude)) & ~np.isin(subjects, [str(s) for s in

@@ -109,9 +109,9 @@ def synth_body(joints, joint_frames, build="average"):
     Parameters
     ----------
     joints : array, shape (F, 17, 3)
-        Standard joints in world metres (:func:`bvh.standard_joints`).
+        Standard joints in world metres (:func:`cmu.standard_joints`).
     joint_frames : array, shape (F, 17, 4, 4)
-        World transforms of the bone starting at each joint (:func:`bvh.standard_joint_frames`);
+        World transforms of the bone starting at each joint (:func:`cmu.standard_joint_frames`);
         their rotation sets each limb's axial twist, so textures turn with the limb.
     build : {"slim", "average", "heavy"} or float
         Radius scale of the limbs and trunk.
@@ -537,15 +537,15 @@ def take_from_bvh(bvh_path, *, frames=None, fps=30.0, **scene_options):
     scene : Scene
     joints : array, shape (F, 17, 3)
     """
-    from ..files import bvh
+    from ..files import cmu
 
-    motion = bvh.load_cmu(bvh_path, fps=fps)
+    motion = cmu.load_cmu(bvh_path, fps=fps)
     sel = None if frames is None else np.arange(motion.num_frames)[frames]
     if sel is not None and len(sel) == 0:
         raise ZoopraxisError(f"{bvh_path}: frame range {frames} is empty "
                              f"(the capture has {motion.num_frames} frames at {fps:g} fps)")
-    joints = bvh.standard_joints(motion, frames=sel)
-    jframes = bvh.standard_joint_frames(motion, frames=sel)
+    joints = cmu.standard_joints(motion, frames=sel)
+    jframes = cmu.standard_joint_frames(motion, frames=sel)
     return make_scene(joints, jframes, **scene_options), joints
 
 

@@ -447,9 +447,9 @@ def test_pose_prior_file_and_exclusion():
 def test_pose_prior_learned_from_takes_saves_and_loads(tmp_path, shared_data):
     """A take's 3D joints become angles (each frame fitted within a centimetre), the prior
     holds them and their mirror images labelled with the take, and its file reads back."""
-    from zoopraxis.core.files import bvh
+    from zoopraxis.core.files import cmu
 
-    joints = bvh.standard_joints(bvh.load_cmu(shared_data / "cmu_mocap" / "131_02.bvh",
+    joints = cmu.standard_joints(cmu.load_cmu(shared_data / "cmu_mocap" / "131_02.bvh",
                                               fps=30))
     joints[10, 5] = np.nan                                  # a frame with a joint missing
     angles, rms = init.take_angles(joints, step=10)
@@ -584,10 +584,10 @@ def test_one_view_camera_tilt_is_the_animators_to_set(rng):
 def held_out_and_flipped(shared_data):
     """Angles of 131_03 every 25 frames, and the same with a thigh and an upper arm swung to
     the opposite side."""
-    from zoopraxis.core.files import bvh
+    from zoopraxis.core.files import cmu
     from zoopraxis.core.body import fit3d
 
-    joints = bvh.standard_joints(bvh.load_cmu(shared_data / "cmu_mocap" / "131_03.bvh",
+    joints = cmu.standard_joints(cmu.load_cmu(shared_data / "cmu_mocap" / "131_03.bvh",
                                               fps=30))[::25]
     body, poses, _ = fit3d.fit_sequence(joints)
     a = np.array([p.angles for p in poses])
@@ -635,10 +635,10 @@ def test_one_view_fit_of_held_out_capture_poses(shared_data):
     prior (not only as the chooser of depth signs) the median Procrustes-aligned MPJPE is
     under 60 mm (55; with the everyday-angle prior in the fit it was 70; one frame of the
     six, a pose unlike the other takes', is off by more than 120 mm either way)."""
-    from zoopraxis.core.files import bvh
+    from zoopraxis.core.files import cmu
 
     prior = init.PosePrior.load(exclude=["01_01"])
-    joints = bvh.standard_joints(bvh.load_cmu(shared_data / "cmu_mocap" / "01_01.bvh",
+    joints = cmu.standard_joints(cmu.load_cmu(shared_data / "cmu_mocap" / "01_01.bvh",
                                               fps=30))
     rng = np.random.default_rng(4)
     errors = []

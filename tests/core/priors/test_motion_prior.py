@@ -313,9 +313,9 @@ def test_find_gait_cycles_rejects_walking_sideways():
 
 
 def test_cmu_slow_walk_has_gait_cycles(shared_data):
-    from zoopraxis.core.files import bvh
+    from zoopraxis.core.files import cmu
 
-    joints = bvh.standard_joints(bvh.load_cmu(shared_data / "cmu_mocap" / "131_02.bvh", fps=30))
+    joints = cmu.standard_joints(cmu.load_cmu(shared_data / "cmu_mocap" / "131_02.bvh", fps=30))
     cycles, _ = mp.find_gait_cycles(joints, 30.0)
     assert len(cycles) >= 3
     assert all(0.5 < (b - a) / 30.0 < 2.0 for a, b in cycles)
