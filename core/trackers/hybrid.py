@@ -50,7 +50,8 @@ from ..body.body import Pose
 from .differential import DifferentialTracker, Settings, State, StepReport, prepare_images
 from ..errors import ZoopraxisError
 from .image_motion import accumulate
-from ..priors.motion_prior import SmoothMotionPrior, WalkingPrior, smooth_sigmas
+from ..priors.motion_prior import SmoothMotionPrior, smooth_sigmas
+from ..priors.walking import WalkingPrior
 from .particle import ParticleFilter
 from ..imaging.plates import to_gray_float
 from ..take.track import (BLEND_REACH, Cancelled, FrameSource, Initial, blend_report, blend_states,
