@@ -74,6 +74,7 @@ def test_silhouettes_give_the_limb_lengths():
     assert fit.body.dims["torso"] == wrong.dims["torso"]
 
 
+@pytest.mark.slow
 def test_finetune_brings_the_limbs_closer_and_the_track_no_worse(take):
     scene, joints, truth, wrong, start, cams, anchors, clean = take
     lines, calls = [], []

@@ -155,6 +155,7 @@ class FrozenPlate:
         return self.images[frame]
 
 
+@pytest.mark.slow
 def test_passes_in_worker_processes_give_the_same_track(take, monkeypatch):
     """Three anchors make five passes; forked workers track them side by side, and measure
     the silhouettes of the blended frames, and the result is the one tracking them in turn
@@ -399,6 +400,7 @@ def test_blend_weights_trust_the_pass_that_holds():
     assert np.all(w[:5] < 0.05) and np.all(w < 0.35)
 
 
+@pytest.mark.slow
 def test_passes_between_anchors_meet_past_the_middle(take):
     """Each pass tracks a little past the middle; the two are blended there, and each frame
     outside that stretch comes from its nearer anchor's pass."""
@@ -425,6 +427,7 @@ def test_passes_between_anchors_meet_past_the_middle(take):
     assert calls[-1] == (16, 16) and list(res.frames) == list(range(N))
 
 
+@pytest.mark.slow
 def test_a_pass_goes_on_where_its_partner_lost_the_body(take, monkeypatch):
     scene, joints, body, poses = take
     cams = {c.name: c for c in scene.cameras}
