@@ -1,9 +1,9 @@
 """The scaled orthographic camera of Bregler & Malik (1998), eq. (11), optionally with a weak
 perspective (``kappa``): the camera of the uncalibrated mode, fitted to one view of a body.
 
-Conventions are those of :mod:`camera` (OpenCV camera axes and pixels, ``X_cam = R @ X_world + t``);
-the behaviour shared with the pinhole camera (world/camera transforms, cached pixel rays,
-``replace``) is ``camera._Camera``.
+Conventions are those of :mod:`camera` (OpenCV camera axes and pixels,
+``X_cam = R @ X_world + t``); the behaviour shared with the pinhole camera (world/camera
+transforms, cached pixel rays, ``replace``) is ``camera._Camera``.
 """
 
 import dataclasses

@@ -1,8 +1,9 @@
 """Model renderer: support map, depth, surface points and normals by ray casting quadrics.
 
 The body is a set of primitives (ellipsoids and elliptic cone frustums with flat caps, made in
-body.primitives), each rigidly attached to one segment. For every pixel the renderer intersects the camera ray with
-the primitives and keeps the nearest hit in a z-buffer, so self-occlusion falls out. It gives:
+body.primitives), each rigidly attached to one segment. For every pixel the renderer intersects
+the camera ray with the primitives and keeps the nearest hit in a z-buffer, so self-occlusion
+falls out. It gives:
 
 - the support map (Bregler & Malik §2.4: "the projection of the ellipsoids into the image"),
   which is also Yamamoto et al.'s *region image* (§2.4, Fig. 4): the segment label per pixel;
