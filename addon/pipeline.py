@@ -275,8 +275,8 @@ def track(take, *, init=None, progress=None, cancel=None, log=None):
     if take.tracker == "differential":
         module = _import("take.track", "the differential tracker")
         return call(module.track, take.plates, take.anchors, take.cameras, **options)
-    module = _import("trackers.hybrid", f"the {take.tracker} tracker")
-    return call(module.track, take.plates, take.anchors, take.cameras, tracker=take.tracker,
+    module = _import("take.track", f"the {take.tracker} tracker")
+    return call(module.track_filter, take.plates, take.anchors, take.cameras, tracker=take.tracker,
                 **options)
 
 

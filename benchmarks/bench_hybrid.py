@@ -26,7 +26,7 @@ hybrid loses no frame (none over 150 mm).
     .venv/bin/python benchmarks/bench_hybrid.py --trackers particle --layers 0 --silhouette 0
 
 ``--layers``, ``--prior-scale`` and ``--silhouette`` change the filter's annealing layers, the
-smooth prior's noise and the silhouette cue's weight (defaults: ``hybrid.track``'s).
+smooth prior's noise and the silhouette cue's weight (defaults: ``track_filter``'s).
 ``BENCH_HYBRID_FRAMES=1`` prints every frame's error, status and silhouette cover.
 """
 
@@ -42,8 +42,10 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 import numpy as np  # noqa: E402
 
 from bench_track import markers_from_truth, procrustes_mpjpe  # noqa: E402
-from zoopraxis.core import fit3d, hybrid, synth  # noqa: E402
-from zoopraxis.core import track as T  # noqa: E402
+from zoopraxis.core.body import fit3d  # noqa: E402
+from zoopraxis.core.synthetic import synth  # noqa: E402
+from zoopraxis.core.take import track as T  # noqa: E402
+from zoopraxis.core.take.track import track_filter  # noqa: E402
 
 DATA = Path(os.environ.get("ZOOPRAXIS_SHARED_DATA",
                            Path(__file__).resolve().parents[2] / "shared" / "data"))
@@ -77,7 +79,7 @@ def run_case(name, tracker, *, quick, init_mode, particles, seed, layers=None,
     if tracker == "differential":
         res = T.track(plates, anchors, cams, init=init)
     else:
-        res = hybrid.track(plates, anchors, cams, init=init, tracker=tracker,
+        res = track_filter(plates, anchors, cams, init=init, tracker=tracker,
                            particles=particles, seed=seed, layers=layers,
                            prior_scale=prior_scale, silhouette=silhouette)
     seconds = (time.perf_counter() - t0) / max(len(res.frames) - 1, 1)
@@ -111,11 +113,11 @@ def main(argv=None):
     p.add_argument("--particles", type=int, default=2000)
     p.add_argument("--seed", type=int, default=2345)
     p.add_argument("--prior-scale", type=float, help="scale of the smooth prior's noise "
-                   "(default: hybrid.track's, 1 for the filter alone, 3 in the hybrid)")
+                   "(default: track_filter's, 1 for the filter alone, 3 in the hybrid)")
     p.add_argument("--silhouette", type=float,
                    help="weight of the filter's silhouette cue (0: the paper's appearance only)")
     p.add_argument("--layers", type=int, help="annealing layers of the filter (default: "
-                   "hybrid.track's, 2 for the filter alone, 0 in the hybrid)")
+                   "track_filter's, 2 for the filter alone, 0 in the hybrid)")
     args = p.parse_args(argv)
     if not (DATA / "cmu_mocap").is_dir():
         sys.exit(f"no motion capture at {DATA / 'cmu_mocap'} (set ZOOPRAXIS_SHARED_DATA)")

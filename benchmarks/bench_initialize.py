@@ -34,10 +34,11 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from zoopraxis.core import body as bm  # noqa: E402
-from zoopraxis.core import calibrate as cal  # noqa: E402
-from zoopraxis.core import initialize as init  # noqa: E402
-from zoopraxis.core import se3, synth  # noqa: E402
+from zoopraxis.core.body import body as bm  # noqa: E402
+from zoopraxis.core.calibration import calibrate as cal  # noqa: E402
+from zoopraxis.core.initialize import fit as init  # noqa: E402
+from zoopraxis.core.geometry import se3  # noqa: E402
+from zoopraxis.core.synthetic import synth  # noqa: E402
 from zoopraxis.core.geometry.camera import PinholeCamera, look_at, ring_of_cameras  # noqa: E402
 from zoopraxis.core.body.joints import JOINT_INDEX, STANDARD_JOINTS  # noqa: E402
 from zoopraxis.core.files.markers import Anchor  # noqa: E402

@@ -22,7 +22,8 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
-from zoopraxis.core import markers, plates  # noqa: E402
+from zoopraxis.core.files import markers  # noqa: E402
+from zoopraxis.core.imaging import plates  # noqa: E402
 from zoopraxis.core.imaging.contact_sheet import contact_sheet  # noqa: E402
 from zoopraxis.core.take.track import track  # noqa: E402
 

@@ -33,7 +33,8 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import numpy as np  # noqa: E402
 
-from zoopraxis.core import fit3d, synth  # noqa: E402
+from zoopraxis.core.body import fit3d  # noqa: E402
+from zoopraxis.core.synthetic import synth  # noqa: E402
 from zoopraxis.core.body.joints import JOINT_INDEX, STANDARD_JOINTS  # noqa: E402
 from zoopraxis.core.files.markers import Anchor  # noqa: E402
 

@@ -121,12 +121,9 @@ def main(argv):
             result = track(opened, anchors, cameras, workers=workers, camera_tilt=camera_tilt,
                            perspective=args.perspective, **kwargs)
         else:
-            try:
-                from ..trackers import hybrid
-            except ImportError:
-                raise ZoopraxisError(f"--tracker {args.tracker} is not available in this "
-                                     "version; use --tracker differential") from None
-            result = hybrid.track(opened, anchors, cameras, tracker=args.tracker,
+            from ..take.track import track_filter
+
+            result = track_filter(opened, anchors, cameras, tracker=args.tracker,
                                   particles=args.particles, seed=args.seed,
                                   prior=args.motion_prior, **kwargs)
     _write_or_rescue(out, result, args.force)

@@ -35,7 +35,7 @@ import cv2
 import numpy as np
 
 from ..geometry import se3
-from ..imaging.background import BackgroundModel, estimate_background, signed_distance
+from ..imaging.background import BackgroundModel, signed_distance
 from ..body.body import LENGTH_DIMS, Pose
 from ..errors import ZoopraxisError
 from ..trackers.image_motion import image_with_gradients, sample
@@ -500,6 +500,7 @@ def finetune(plates, anchors, cameras, *, result=None, init=None, frames=None, o
         No calibration, a view without a camera, bad anchors or frames (as :func:`track.track`).
     """
     from . import track as T
+    from .driver import FrameSource
     from ..trackers.differential import Settings
     from ..initialize.fit import initialize
 
@@ -566,7 +567,7 @@ def finetune(plates, anchors, cameras, *, result=None, init=None, frames=None, o
     factors = {v: min(1.0, max_size / max(plates[v].image_size)) for v in views}
     work = [cameras[v].scaled(factors[v], sampling="resize") if factors[v] != 1.0 else cameras[v]
             for v in views]
-    source = T.FrameSource(plates, views, offsets, factors)
+    source = FrameSource(plates, views, offsets, factors)
     index = {int(f): i for i, f in enumerate(first.frames)}
     pose_of = {f: Pose(first.roots[i], first.angles[i]) for f, i in index.items()}
     picked[:] = _sample_frames(first, samples)
@@ -634,15 +635,26 @@ def finetune(plates, anchors, cameras, *, result=None, init=None, frames=None, o
 
 def _backgrounds(given, views, source, body, cameras, pose_of, factors):
     """Background model per view: given (clean plates) or estimated from up to 25 frames with
-    the person, where the first track put it (dilated), left out."""
-    out = []
+    the person, where the first track put it, kept out of each frame
+    (:func:`backgrounds.backgrounds_without_body`)."""
+    from .backgrounds import backgrounds_without_body
+
     frames = sorted(pose_of)
     sample_frames = [frames[i] for i in np.unique(
         np.linspace(0, len(frames) - 1, min(25, len(frames))).astype(int))]
-    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (15, 15))
-    prims = None
+    given = given or {}
+    prims = body.primitives()
+
+    def silhouettes(f):
+        seg2world = body.seg2world(pose_of[f])
+        return [render(cameras[c], seg2world, prims, want=()).label >= 0
+                for c in range(len(views))]
+
+    out = backgrounds_without_body(source, sample_frames, silhouettes,
+                                   [v not in given and len(sample_frames) >= 5 for v in views],
+                                   margin=15)
     for c, v in enumerate(views):
-        if given is not None and v in given:
+        if v in given:
             bg = given[v]
             if not isinstance(bg, BackgroundModel):
                 img = np.asarray(bg)
@@ -653,20 +665,7 @@ def _backgrounds(given, views, source, body, cameras, pose_of, factors):
                                      interpolation=cv2.INTER_AREA)
                 img = img.astype(np.float32) / (255.0 if img.dtype == np.uint8 else 1.0)
                 bg = BackgroundModel(img, 0.01, None)
-            out.append(bg)
-            continue
-        if len(sample_frames) < 5:
-            out.append(None)
-            continue
-        if prims is None:
-            prims = body.primitives()
-        imgs, exclude = [], []
-        for f in sample_frames:
-            img = source.colour(f)[c]
-            rr = render(cameras[c], body.seg2world(pose_of[f]), prims, want=())
-            imgs.append(img)
-            exclude.append((img, cv2.dilate((rr.label >= 0).astype(np.uint8), kernel) > 0))
-        out.append(estimate_background(imgs, exclude=exclude))
+            out[c] = bg
     return out
 
 

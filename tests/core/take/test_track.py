@@ -7,6 +7,13 @@ from zoopraxis.core.body import fit3d
 from zoopraxis.core.geometry import se3
 from zoopraxis.core.synthetic import synth
 from zoopraxis.core.take import track as T
+from zoopraxis.core.take import backgrounds as BG
+from zoopraxis.core.trackers import differential as D
+from zoopraxis.core.take import driver as DR
+from zoopraxis.core.take import passes as P
+from zoopraxis.core.take import status as S
+from zoopraxis.core.take import workers as W
+from zoopraxis.core.trackers import stepper as stepper_module
 from zoopraxis.core.body.body import Pose
 from zoopraxis.core.geometry.ortho import ScaledOrthoCamera
 from zoopraxis.core.errors import ZoopraxisError
@@ -98,14 +105,14 @@ def test_unexplained_foreground_flags_a_body_that_left_the_person(take):
     backgrounds = [estimate_background([plates[c.name].read(f) for f in range(N)])
                    for c in cams]
     use = [True] * len(cams)
-    fit0, iou0, u0, _ = T.silhouette_measures(tracker, true, colours, backgrounds, use)
-    fit1, iou1, u1, _ = T.silhouette_measures(tracker, moved, colours, backgrounds, use)
+    fit0, iou0, u0, _ = S.silhouette_measures(tracker, true, colours, backgrounds, use)
+    fit1, iou1, u1, _ = S.silhouette_measures(tracker, moved, colours, backgrounds, use)
     assert np.all(u0 < 0.1)
-    assert np.max(u1 - u0) > T.UNEXPLAINED_UNCERTAIN
-    assert T.frame_status(fit1 / fit0, iou1 / iou0, 1.0, None, u1 - u0) != "ok"
-    assert T.frame_status([1.0] * len(cams), [1.0] * len(cams), 1.0, None, u1 - u0) \
+    assert np.max(u1 - u0) > S.UNEXPLAINED_UNCERTAIN
+    assert S.frame_status(fit1 / fit0, iou1 / iou0, 1.0, None, u1 - u0) != "ok"
+    assert S.frame_status([1.0] * len(cams), [1.0] * len(cams), 1.0, None, u1 - u0) \
         == "uncertain"
-    assert T.frame_status(fit0 / fit0, iou0 / iou0, 1.0, None, u0 - u0) == "ok"
+    assert S.frame_status(fit0 / fit0, iou0 / iou0, 1.0, None, u0 - u0) == "ok"
 
 
 def test_unexplained_fraction_counts_thick_blobs_only():
@@ -115,10 +122,10 @@ def test_unexplained_fraction_counts_thick_blobs_only():
     fg = fg.copy()
     fg[40:50, 50:70] = True                                         # a 10 x 20 blob: 200 px
     fg[5, :] = True                                                 # a one-pixel line: noise
-    assert T.unexplained_fraction(fg, labels) == pytest.approx(0.5, abs=0.03)
+    assert S.unexplained_fraction(fg, labels) == pytest.approx(0.5, abs=0.03)
     known = np.ones_like(fg)
     known[40:50, 50:70] = False                                     # never seen empty there
-    assert T.unexplained_fraction(fg, labels, known) < 0.02
+    assert S.unexplained_fraction(fg, labels, known) < 0.02
 
 
 def test_tracks_backward_before_the_first_anchor(take):
@@ -160,7 +167,7 @@ def test_passes_in_worker_processes_give_the_same_track(take, monkeypatch):
     """Three anchors make five passes; forked workers track them side by side, and measure
     the silhouettes of the blended frames, and the result is the one tracking them in turn
     gives, progress included."""
-    if not T._can_fork():
+    if not W._can_fork():
         pytest.skip("worker processes fork: Linux only")
     import os
 
@@ -171,14 +178,15 @@ def test_passes_in_worker_processes_give_the_same_track(take, monkeypatch):
     init = T.Initial(body, {f: poses[f] for f in (0, 3, 6)}, cams)
     parent = os.getpid()
     measured_here = []
-    measure = T.silhouette_measures
+    measure = S.silhouette_measures
 
     def counted(*args, **kw):
         if os.getpid() == parent:
             measured_here.append(1)
         return measure(*args, **kw)
 
-    monkeypatch.setattr(T, "silhouette_measures", counted)
+    monkeypatch.setattr(DR, "silhouette_measures", counted)
+    monkeypatch.setattr(BG, "silhouette_measures", counted)
     calls = {1: [], 2: []}
     here = {}
     res = {}
@@ -203,7 +211,7 @@ def test_passes_in_worker_processes_give_the_same_track(take, monkeypatch):
 
 
 def test_cancel_with_worker_processes_keeps_what_they_tracked(take):
-    if not T._can_fork():
+    if not W._can_fork():
         pytest.skip("worker processes fork: Linux only")
     res = run(take, anchor_frames=(0, 6), workers=2, cancel=lambda: True)
     assert res.extra["cancelled"] is True
@@ -213,7 +221,7 @@ def test_cancel_with_worker_processes_keeps_what_they_tracked(take):
 def test_worker_processes_with_view_threads(take):
     """The parent's thread pools (views, next-frame images) exist before the fork; a child
     must make its own instead of waiting on threads it does not have."""
-    if not T._can_fork():
+    if not W._can_fork():
         pytest.skip("worker processes fork: Linux only")
     from zoopraxis.core.trackers.differential import Settings
 
@@ -222,19 +230,19 @@ def test_worker_processes_with_view_threads(take):
 
 
 def test_an_error_in_a_worker_process_reaches_the_caller(take, monkeypatch):
-    if not T._can_fork():
+    if not W._can_fork():
         pytest.skip("worker processes fork: Linux only")
     import os
 
     parent = os.getpid()
-    prepare = T.prepare_images
+    prepare = D.prepare_images
 
     def failing(*args, **kw):
         if os.getpid() != parent:
             raise ZoopraxisError("view 'cam1', frame 4: cannot be prepared")
         return prepare(*args, **kw)
 
-    monkeypatch.setattr(T, "prepare_images", failing)
+    monkeypatch.setattr(stepper_module, "prepare_images", failing)
     with pytest.raises(ZoopraxisError, match="frame 4: cannot be prepared"):
         run(take, anchor_frames=(0, 6), workers=2)
 
@@ -325,9 +333,9 @@ def test_bad_input(take):
 
 def test_blend_states_interpolates():
     cams = [ScaledOrthoCamera("a", (10, 10), s=10.0)]
-    a = T.State(np.eye(4)[None], np.zeros(3), cams)
-    b = T.State(se3.exp_se3([0.2, 0, 0, 0, 0, 0.4])[None], np.ones(3), [cams[0].replace(s=40.0)])
-    m = T.blend_states(a, b, 0.5)
+    a = D.State(np.eye(4)[None], np.zeros(3), cams)
+    b = D.State(se3.exp_se3([0.2, 0, 0, 0, 0, 0.4])[None], np.ones(3), [cams[0].replace(s=40.0)])
+    m = P.blend_states(a, b, 0.5)
     assert np.allclose(m.angles, 0.5)
     assert np.allclose(se3.log_se3(m.roots[0]), [0.1, 0, 0, 0, 0, 0.2])
     assert np.isclose(m.cameras[0].s, 20.0)
@@ -335,44 +343,44 @@ def test_blend_states_interpolates():
 
 def test_blend_states_interpolates_a_near_cameras_distance():
     cams = [ScaledOrthoCamera("a", (10, 10), s=10.0, t=[0, 0, 2.0], kappa=0.5)]
-    a = T.State(np.eye(4)[None], np.zeros(3), cams)
-    b = T.State(np.eye(4)[None], np.ones(3), [cams[0].replace(s=40.0, kappa=0.25, t=[0, 0, 4])])
-    m = T.blend_states(a, b, 0.5)
+    a = D.State(np.eye(4)[None], np.zeros(3), cams)
+    b = D.State(np.eye(4)[None], np.ones(3), [cams[0].replace(s=40.0, kappa=0.25, t=[0, 0, 4])])
+    m = P.blend_states(a, b, 0.5)
     assert np.isclose(m.cameras[0].s, 20.0) and np.isclose(m.cameras[0].kappa, 0.375)
     # the centre stays at depth 0, where the renderer has a pinhole's
     assert np.isclose(m.cameras[0].cam_from_world(m.cameras[0].center)[2], 0.0)
     # a camera fitted far (kappa 0) beside a near one: at its own end it is itself
-    far = T.State(np.eye(4)[None], np.ones(3), [cams[0].replace(kappa=0.0, t=[0, 0, 10.0])])
+    far = D.State(np.eye(4)[None], np.ones(3), [cams[0].replace(kappa=0.0, t=[0, 0, 10.0])])
     for w, kappa in ((0.0, 0.0), (0.5, 0.25), (1.0, 0.5)):
-        m = T.blend_states(far, a, w)
+        m = P.blend_states(far, a, w)
         assert np.isclose(m.cameras[0].kappa, kappa)
         assert m.cameras[0].t[2] == (10.0 if w == 0.0 else 1.0 / kappa)
 
 
 def test_frame_status_from_silhouettes_and_residuals():
     nan = np.nan
-    assert T.frame_status([1.0, 0.95], [1.0, 0.9], 1.0) == "ok"
-    assert T.frame_status([1.0, 0.7], [1.0, 0.9], 1.0) == "uncertain"      # one view slips
-    assert T.frame_status([0.5, 0.4], [1.0, 1.0], 1.0) == "lost"           # off the person
-    assert T.frame_status([1.0, 1.0], [0.4, 0.5], 1.0) == "lost"           # shrunk into it
-    assert T.frame_status([nan], [nan], 3.0) == "uncertain"                # no masks: residual
-    assert T.frame_status([nan], [nan], 5.0) == "lost"
+    assert S.frame_status([1.0, 0.95], [1.0, 0.9], 1.0) == "ok"
+    assert S.frame_status([1.0, 0.7], [1.0, 0.9], 1.0) == "uncertain"      # one view slips
+    assert S.frame_status([0.5, 0.4], [1.0, 1.0], 1.0) == "lost"           # off the person
+    assert S.frame_status([1.0, 1.0], [0.4, 0.5], 1.0) == "lost"           # shrunk into it
+    assert S.frame_status([nan], [nan], 3.0) == "uncertain"                # no masks: residual
+    assert S.frame_status([nan], [nan], 5.0) == "lost"
     # fast motion: a high residual with silhouettes that fit is uncertain, not lost
-    assert T.frame_status([1.0, 0.95], [1.0, 0.9], 5.0) == "uncertain"
-    assert T.frame_status([1.0, 0.95], [1.0, 0.55], 5.0) == "lost"
+    assert S.frame_status([1.0, 0.95], [1.0, 0.9], 5.0) == "uncertain"
+    assert S.frame_status([1.0, 0.95], [1.0, 0.55], 5.0) == "lost"
     # the body overlaps well but one limb lies outside the silhouettes
     limbs = {"left leg": 0.9, "right leg": 0.8, "left arm": 0.7, "right arm": 0.85}
-    assert T.frame_status([1.0, 0.95], [1.0, 0.9], 1.0, limbs) == "ok"
-    assert T.frame_status([1.0, 0.95], [1.0, 0.9], 1.0, {**limbs, "right leg": 0.3}) \
+    assert S.frame_status([1.0, 0.95], [1.0, 0.9], 1.0, limbs) == "ok"
+    assert S.frame_status([1.0, 0.95], [1.0, 0.9], 1.0, {**limbs, "right leg": 0.3}) \
         == "uncertain"
-    assert T.frame_status([1.0, 0.95], [1.0, 0.9], 1.0, {**limbs, "right leg": -0.6}) == "lost"
+    assert S.frame_status([1.0, 0.95], [1.0, 0.9], 1.0, {**limbs, "right leg": -0.6}) == "lost"
     # one view: a low score may be occlusion by the body; outside the silhouette is lost
-    assert T.frame_status([1.0], [1.0], 1.0, {**limbs, "right leg": 0.3}) == "ok"
-    assert T.frame_status([1.0], [1.0], 1.0, {**limbs, "right leg": -0.6}) == "lost"
+    assert S.frame_status([1.0], [1.0], 1.0, {**limbs, "right leg": 0.3}) == "ok"
+    assert S.frame_status([1.0], [1.0], 1.0, {**limbs, "right leg": -0.6}) == "lost"
     # the overlap holds but the person's own pixels are left unexplained in one view
-    assert T.frame_status([1.0, 0.95], [1.0, 0.9], 1.0, None, [0.05, 0.1]) == "ok"
-    assert T.frame_status([1.0, 0.95], [1.0, 0.9], 1.0, None, [0.05, 0.4]) == "uncertain"
-    assert T.frame_status([1.0, 0.95], [1.0, 0.9], 1.0, None, [nan, nan]) == "ok"
+    assert S.frame_status([1.0, 0.95], [1.0, 0.9], 1.0, None, [0.05, 0.1]) == "ok"
+    assert S.frame_status([1.0, 0.95], [1.0, 0.9], 1.0, None, [0.05, 0.4]) == "uncertain"
+    assert S.frame_status([1.0, 0.95], [1.0, 0.9], 1.0, None, [nan, nan]) == "ok"
 
 
 def test_blend_weights_trust_the_pass_that_holds():
@@ -384,18 +392,18 @@ def test_blend_weights_trust_the_pass_that_holds():
 
     n = 9
     good = reports([3.0] * n, [0.7] * n)
-    w = T.blend_weights(good, reports([3.0] * n, [0.7] * n))
+    w = P.blend_weights(good, reports([3.0] * n, [0.7] * n))
     np.testing.assert_allclose(w, np.arange(1, n + 1) / (n + 1))   # by distance alone
     # the backward pass lost the body over the first frames: the blend keeps the forward one
     lost = reports([12.0] * 5 + [3.0] * 4, [0.3] * 5 + [0.7] * 4)
-    w = T.blend_weights(good, lost)
+    w = P.blend_weights(good, lost)
     assert np.all(w[:3] < 0.02)
     assert w[-1] > 0.85
     # and the other way round
-    w = T.blend_weights(lost, good)
+    w = P.blend_weights(lost, good)
     assert np.all(w[:3] > 0.9)
     # no silhouettes (no background model): residuals alone decide
-    w = T.blend_weights(reports([3.0] * n, [np.nan] * n),
+    w = P.blend_weights(reports([3.0] * n, [np.nan] * n),
                         reports([12.0] * n, [np.nan] * n))
     assert np.all(w[:5] < 0.05) and np.all(w < 0.35)
 
@@ -405,9 +413,9 @@ def test_passes_between_anchors_meet_past_the_middle(take):
     """Each pass tracks a little past the middle; the two are blended there, and each frame
     outside that stretch comes from its nearer anchor's pass."""
     scene, joints, body, poses = take
-    assert T.blend_stretch(0, 100, 8) == (42, 58)
-    assert T.blend_stretch(0, 7, None) == (1, 6) and T.blend_stretch(0, 7, 15) == (1, 6)
-    passes, total = T.plan_passes([10, 100, 200], range(0, 300), 8)
+    assert P.blend_stretch(0, 100, 8) == (42, 58)
+    assert P.blend_stretch(0, 7, None) == (1, 6) and P.blend_stretch(0, 7, 15) == (1, 6)
+    passes, total = P.plan_passes([10, 100, 200], range(0, 300), 8)
     assert passes == [(10, 0, None), (10, 100, (47, 63)), (100, 200, (142, 158)),
                       (200, 299, None)]
     assert total == 10 + (53 + 53) + (58 + 58) + 99
@@ -440,7 +448,7 @@ def test_a_pass_goes_on_where_its_partner_lost_the_body(take, monkeypatch):
     def lost_early(forward, backward, lo, hi, reach, **kw):
         asked.append((sorted(forward), sorted(backward), lo, hi))
         return N - 2, 1         # both passes must reach the other anchor
-    monkeypatch.setattr(T, "extend_passes", lost_early)
+    monkeypatch.setattr(DR, "extend_passes", lost_early)
     calls, said = [], []
     res = T.track(frozen, anchors, cams, init=init, blend_reach=1,
                   progress=lambda d, t: calls.append((d, t)), log=said.append)
@@ -451,7 +459,7 @@ def test_a_pass_goes_on_where_its_partner_lost_the_body(take, monkeypatch):
     # the passes went on from where they stopped: the poses of whole passes, blended over
     # the whole stretch (only the limb search's draws differ)
     np.testing.assert_allclose(res.joints3d, full.joints3d, atol=1e-4)
-    if T._can_fork():
+    if W._can_fork():
         # in worker processes the passes that go on start as soon as their pair is done
         calls = []
         forked = T.track(frozen, anchors, cams, init=init, blend_reach=1, workers=2,
@@ -470,15 +478,15 @@ def test_extend_passes_follows_the_lost_pass():
     good = {f: rep(3.0, 0.7) for f in range(a + 1, b)}
     forward = {f: good[f] for f in range(a + 1, hi + 1)}
     backward = {f: good[f] for f in range(lo, b)}
-    assert T.extend_passes(forward, backward, lo, hi, reach) == (hi, lo)
-    assert T.extend_passes({}, {}, 8, 7, reach) == (7, 8)       # anchors at 7 and 8
+    assert P.extend_passes(forward, backward, lo, hi, reach) == (hi, lo)
+    assert P.extend_passes({}, {}, 8, 7, reach) == (7, 8)       # anchors at 7 and 8
     # the forward pass lost the body from frame 12 to 20 and found it again
     lost_fwd = {f: rep(12.0, 0.3) if 12 <= f <= 20 else r for f, r in forward.items()}
-    forward_to, backward_to = T.extend_passes(lost_fwd, backward, lo, hi, reach)
+    forward_to, backward_to = P.extend_passes(lost_fwd, backward, lo, hi, reach)
     assert forward_to == hi and 12 - reach - 2 <= backward_to <= 12 - reach + 2
     # the backward pass lost it near its anchor
     lost_bwd = {f: rep(12.0, 0.3) if f >= 50 else r for f, r in backward.items()}
-    forward_to, backward_to = T.extend_passes(forward, lost_bwd, lo, hi, reach)
+    forward_to, backward_to = P.extend_passes(forward, lost_bwd, lo, hi, reach)
     assert backward_to == lo and forward_to == b - 1
 
 
@@ -493,12 +501,12 @@ def test_tracked_backgrounds_keep_the_body_out(take):
     cams = list(scene.cameras)
     views = [c.name for c in cams]
     plates = synth.scene_plates(scene)
-    source = T.FrameSource(plates, views, {}, dict.fromkeys(views, 1.0))
+    source = DR.FrameSource(plates, views, {}, dict.fromkeys(views, 1.0))
     tracker = DifferentialTracker(body, True)
     states = {f: State(np.stack([poses[f].root] * len(cams)), poses[f].angles.copy(), cams)
               for f in range(N)}
     first = [estimate_background([plates[v].read(f) for f in range(N)]) for v in views]
-    refined = T.tracked_backgrounds(tracker, source, views, range(N), states, [True, False])
+    refined = BG.tracked_backgrounds(tracker, source, views, range(N), states, [True, False])
     assert refined[1] is None           # a view without silhouettes gets none
     clean = scene.backgrounds[0].astype(np.float32) / 255.0
     covered = np.zeros(clean.shape[:2], bool)

@@ -8,10 +8,12 @@ import numpy as np
 import pytest
 
 from zoopraxis.core.body import fit3d
+from zoopraxis.core.trackers import filter_stepper as FS
 from zoopraxis.core.trackers import hybrid, particle
 from zoopraxis.core.geometry import se3
 from zoopraxis.core.synthetic import synth
 from zoopraxis.core.files import result as result_io
+from zoopraxis.core.take import driver as DR
 from zoopraxis.core.take import track as T
 from zoopraxis.core.body.body import Pose
 from zoopraxis.core.trackers.differential import State
@@ -62,7 +64,7 @@ def run(take, tracker, anchor_frames=(0,), **kw):
     anchors = anchors_at(scene, joints, anchor_frames)
     if tracker == "differential":
         return T.track(plates, anchors, cams, init=init, **kw)
-    return hybrid.track(plates, anchors, cams, init=init, tracker=tracker, **kw)
+    return T.track_filter(plates, anchors, cams, init=init, tracker=tracker, **kw)
 
 
 def mpjpe(res, joints):
@@ -174,12 +176,12 @@ def test_passes_between_anchors_meet_past_the_middle(slow, monkeypatch):
     assert calls[-1] == (5, 5) and list(res.frames) == list(range(6))
     assert mpjpe(res, joints).max() < 0.05
     whole = run(slow, "hybrid", anchor_frames=(0, 5), particles=100, blend_reach=None)
-    monkeypatch.setattr(hybrid, "extend_passes", lambda *a, **kw: (4, 1))
+    monkeypatch.setattr(DR, "extend_passes", lambda *a, **kw: (4, 1))
     calls, said = [], []
     res = run(slow, "hybrid", anchor_frames=(0, 5), particles=100, blend_reach=0,
               progress=lambda d, t: calls.append((d, t)), log=said.append)
     assert calls[-1] == (8, 8)
-    assert "frames 0-5: a pass goes on where the other lost the body" in said
+    assert "frames 0-5: 2 passes go on where the other lost the body" in said
     np.testing.assert_allclose(res.joints3d, whole.joints3d, atol=1e-9)
 
 
@@ -198,21 +200,21 @@ def test_bad_input(slow):
     anchors = anchors_at(scene, joints, [0])
     init = T.Initial(body, {0: poses[0]}, cams)
     with pytest.raises(ZoopraxisError, match="hybrid tracker needs a calibration"):
-        hybrid.track(plates, anchors, None, init=init)
+        T.track_filter(plates, anchors, None, init=init)
     with pytest.raises(ZoopraxisError, match="unknown tracker 'kalman'"):
-        hybrid.track(plates, anchors, cams, init=init, tracker="kalman")
+        T.track_filter(plates, anchors, cams, init=init, tracker="kalman")
     with pytest.raises(ZoopraxisError, match="number of particles"):
-        hybrid.track(plates, anchors, cams, init=init, particles=0)
+        T.track_filter(plates, anchors, cams, init=init, particles=0)
     with pytest.raises(ZoopraxisError, match="unknown motion prior 'run'"):
-        hybrid.track(plates, anchors, cams, init=init, prior="run")
+        T.track_filter(plates, anchors, cams, init=init, prior="run")
     with pytest.raises(ZoopraxisError, match="no camera for view 'cam1'"):
-        hybrid.track(plates, anchors, {"cam0": cams["cam0"]}, init=init)
+        T.track_filter(plates, anchors, {"cam0": cams["cam0"]}, init=init)
     with pytest.raises(ZoopraxisError, match="outside the take"):
-        hybrid.track(plates, anchors, cams, init=init, frames=range(0, 50))
+        T.track_filter(plates, anchors, cams, init=init, frames=range(0, 50))
     with pytest.raises(ZoopraxisError, match="no marker anchor inside frames 3:6"):
-        hybrid.track(plates, anchors, cams, init=init, frames=range(3, 6))
+        T.track_filter(plates, anchors, cams, init=init, frames=range(3, 6))
     with pytest.raises(ZoopraxisError, match="view 'cam1': calibration image size"):
-        hybrid.track(plates, anchors, {"cam0": cams["cam0"], "cam1": cams["cam1"].scaled(0.5)},
+        T.track_filter(plates, anchors, {"cam0": cams["cam0"], "cam1": cams["cam1"].scaled(0.5)},
                      init=init)
 
 
@@ -345,14 +347,14 @@ def test_command_line_runs_the_hybrid(tmp_path):
 
 
 def test_coverage_status_thresholds():
-    drop, limb = hybrid.COVERAGE_DROP, hybrid.LIMB_ON_FOREGROUND
-    assert hybrid.coverage_status(0.9, 0.9) == "ok"
-    assert hybrid.coverage_status(0.9 - 1.5 * drop, 0.9) == "uncertain"
-    assert hybrid.coverage_status(0.9 - 2.5 * drop, 0.9) == "lost"
-    assert hybrid.coverage_status(float("nan"), 0.9) == "ok"
-    assert hybrid.coverage_status(0.9, 0.9, 0.9) == "ok"
-    assert hybrid.coverage_status(0.9, 0.9, 0.8 * limb) == "uncertain"
-    assert hybrid.coverage_status(0.9, 0.9, 0.4 * limb) == "lost"
+    drop, limb = FS.COVERAGE_DROP, FS.LIMB_ON_FOREGROUND
+    assert FS.coverage_status(0.9, 0.9) == "ok"
+    assert FS.coverage_status(0.9 - 1.5 * drop, 0.9) == "uncertain"
+    assert FS.coverage_status(0.9 - 2.5 * drop, 0.9) == "lost"
+    assert FS.coverage_status(float("nan"), 0.9) == "ok"
+    assert FS.coverage_status(0.9, 0.9, 0.9) == "ok"
+    assert FS.coverage_status(0.9, 0.9, 0.8 * limb) == "uncertain"
+    assert FS.coverage_status(0.9, 0.9, 0.4 * limb) == "lost"
 
 
 def test_a_pose_off_the_silhouette_is_not_ok(slow):
@@ -367,19 +369,19 @@ def test_a_pose_off_the_silhouette_is_not_ok(slow):
              for c in scene.cameras]
     pf.start([scene.render_frame(2, c)[0] for c in range(len(scene.cameras))], poses[2])
     pf.step([scene.render_frame(3, c)[0] for c in range(len(scene.cameras))], masks)
-    reference = hybrid.covered_at(pf, poses[3])
+    reference = FS.covered_at(pf, poses[3])
     assert reference > 0.9
-    covered, limb = hybrid.silhouette_fit(pf, poses[3])
+    covered, limb = FS.silhouette_fit(pf, poses[3])
     assert covered == reference and limb > 0.8
-    assert hybrid.coverage_status(covered, reference, limb) == "ok"
+    assert FS.coverage_status(covered, reference, limb) == "ok"
     arms_off = poses[3].copy()
     for dof in ("l_shoulder_abd", "r_shoulder_abd"):
         arms_off.angles[body.dof_index(dof)] += 0.9
     for dof in ("l_shoulder_flex", "r_shoulder_flex"):
         arms_off.angles[body.dof_index(dof)] += 0.6
-    covered, limb = hybrid.silhouette_fit(pf, arms_off)
-    assert limb < 0.5 and hybrid.coverage_status(covered, reference, limb) != "ok"
+    covered, limb = FS.silhouette_fit(pf, arms_off)
+    assert limb < 0.5 and FS.coverage_status(covered, reference, limb) != "ok"
     away = poses[3].copy()
     away.root[:3, 3] += [0.25, 0.25, 0.0]
-    covered, limb = hybrid.silhouette_fit(pf, away)
-    assert hybrid.coverage_status(covered, reference, limb) == "lost"
+    covered, limb = FS.silhouette_fit(pf, away)
+    assert FS.coverage_status(covered, reference, limb) == "lost"
