@@ -183,6 +183,7 @@ def test_uncalibrated_one_view_procrustes_error(rng):
     assert np.mean(errors) < 0.040
 
 
+@pytest.mark.slow
 def test_one_near_view_fits_its_perspective(rng):
     """One uncalibrated 720p view 4 m from the body (a phone's field of view): the scaled
     orthographic fit bends the pose to meet the perspective of the clicks; with
@@ -266,6 +267,7 @@ def test_fixed_dims_are_kept(rng):
     assert mpjpe(result.joints3d(0), X) < 0.02
 
 
+@pytest.mark.slow
 def test_lengths_fitted_in_one_view_come_with_a_note(rng):
     """Lengths fitted to anchor frames that are each clicked in one view (here in two different
     calibrated views) get a note that points to the performer's lengths from several views;
@@ -318,6 +320,7 @@ def test_outlying_click_is_named_and_does_not_drag_the_fit(rng):
     assert mpjpe(result.joints3d(0), X) < 0.025
 
 
+@pytest.mark.slow
 def test_arm_pointing_along_the_view_is_reported_ambiguous(rng):
     """Seen from the front by a scaled orthographic camera, a straight arm raised forwards
     projects exactly like one raised backwards by the same angle (and the prior cannot tell
@@ -359,6 +362,7 @@ def _flat_prior():
     return flat
 
 
+@pytest.mark.slow
 def test_animator_flips_an_ambiguous_limb_to_its_other_depth(rng):
     """The fit names the left arm as ambiguous; flipping it gives the other pose that fits the
     clicks: the wrist on the other side of the shoulder in depth, one of the two poses the
@@ -480,6 +484,7 @@ def test_take_angles_fits_poses_gathered_from_anywhere(rng):
     assert len(angles) == 30 and rms.max() < init.TAKE_DROP_M and np.median(rms) < 0.01
 
 
+@pytest.mark.slow
 def test_one_view_search_starts_from_the_priors_nearest_poses(monkeypatch):
     """A frame seen in one view is also searched from the prior's own poses that project
     nearest to the clicks: with a prior of the performer's take, the sample's last anchor seen
@@ -539,6 +544,7 @@ def _lean(R):
     return float(np.degrees(np.arcsin(np.clip(R[2, 2], -1.0, 1.0))))
 
 
+@pytest.mark.slow
 def test_one_view_camera_tilt_prior_keeps_the_body_upright():
     """One uncalibrated view cannot see how the body leans towards or away from it. Without
     the camera tilt prior the fit leans upright everyday poses seen by a level camera by up
@@ -563,6 +569,7 @@ def test_one_view_camera_tilt_prior_keeps_the_body_upright():
     assert np.mean(errors["prior"]) < 0.8 * np.mean(errors["none"])
 
 
+@pytest.mark.slow
 def test_one_view_camera_tilt_is_the_animators_to_set(rng):
     """A camera said to look down 30 degrees (give or take 3) gets about that look at the
     body (25 degrees: the level view's clicks resist a little), the default one a level look;
@@ -629,6 +636,7 @@ def test_prior_mixture_prefers_held_out_poses_to_their_flipped_limbs(shared_data
         assert np.all(np.isfinite(whiten)) and np.all(np.isfinite(costs))
 
 
+@pytest.mark.slow
 def test_one_view_fit_of_held_out_capture_poses(shared_data):
     """One uncalibrated view, 2 px clicks, of frames of a subject the prior never saw (01_01;
     the prior learned on subject 131's takes only): with the learned prior as the fit's angle
@@ -684,6 +692,7 @@ _EVERYDAY_10M_JOINTS = [
     (-0.579, -0.007, 0.060), (-0.609, -0.174, 0.050)]
 
 
+@pytest.mark.slow
 def test_one_view_everyday_pose_the_prior_alone_would_lead_astray():
     """An everyday pose unlike the captures' in one view: the depth signs the clicks favour
     are found although the learned prior pulls the local fits towards the captures' poses
@@ -830,6 +839,7 @@ def test_init_command_writes_init_json(tmp_path, capsys):
     assert "file exists" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_init_command_keeps_the_dims_of_an_earlier_init(tmp_path, capsys):
     """--dims-from: a one-view init keeps the lengths a three-view init of the performer
     fitted; a file without them, or of another template, is refused naming it."""
@@ -883,6 +893,7 @@ def _sample_first_anchor_in_cam0(tmp_path):
     return root, markers, marks["anchors"][0]["frame"]
 
 
+@pytest.mark.slow
 def test_init_command_one_view_with_and_without_the_pose_prior(tmp_path, capsys):
     root, markers, _ = _sample_first_anchor_in_cam0(tmp_path)
     joints = {}
@@ -948,6 +959,7 @@ def test_prior_command_learns_from_captures_tracks_and_truth(tmp_path, capsys, s
     assert not (tmp_path / "x.npz").exists()
 
 
+@pytest.mark.slow
 def test_init_and_track_commands_take_a_pose_prior_file(tmp_path, capsys):
     """``--pose-prior FILE`` decides the depth of a frame clicked in one view: the sample's
     last anchor in cam2 alone is 88 mm off the truth (Procrustes-aligned) with the shipped
@@ -984,6 +996,7 @@ def test_init_and_track_commands_take_a_pose_prior_file(tmp_path, capsys):
             assert message in err and err.count("\n") == 1
     assert not (tmp_path / "bad.json").exists()
 
+@pytest.mark.slow
 def test_init_and_track_commands_take_the_camera_tilt(tmp_path, capsys):
     """``--camera-tilt DOWN[:SPREAD]`` reaches the one-view fit (the sample's cam0 looks at the
     walker about level; told 30 degrees down, give or take 3, the fitted camera looks down
@@ -1014,6 +1027,7 @@ def test_init_and_track_commands_take_the_camera_tilt(tmp_path, capsys):
         assert "--camera-tilt is for uncalibrated views" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_init_command_flips_a_limb_and_says_how(tmp_path, capsys):
     root, markers, frame = _sample_first_anchor_in_cam0(tmp_path)
     base = ["init", "--markers", str(markers), f"--plate=cam0={root}cam0"]
@@ -1040,6 +1054,7 @@ def test_init_command_flips_a_limb_and_says_how(tmp_path, capsys):
     assert "--flip 'tail': expected FRAME:PART" in err and len(err.strip().splitlines()) == 1
 
 
+@pytest.mark.slow
 def test_init_command_fits_a_near_views_perspective(tmp_path, capsys):
     """``init --perspective``: the sample's cam0, 4.1 m from the walker, gets a camera
     distance near that, printed and kept in init.json, which reads back to the same camera;

@@ -80,6 +80,7 @@ def brisk_runs(brisk):
             "hybrid": run(brisk, "hybrid", particles=500)}
 
 
+@pytest.mark.slow
 def test_hybrid_tracks_a_brisk_walk(brisk, brisk_runs):
     scene, joints, body, poses = brisk
     res = brisk_runs["hybrid"]

@@ -133,6 +133,7 @@ def test_filter_steps_are_reproducible_and_shaped(arm):
     assert np.all(step.spread[:6] < 1e-9)
 
 
+@pytest.mark.slow
 def test_arm_twist_is_uncertain_until_the_elbow_bends(arm):
     """The paper's arm example (§7, Fig. 4): the upper-arm twist starts uniform; while the arm
     is straight nothing shows it, and once the elbow bends the posterior concentrates near the
