@@ -176,7 +176,7 @@ def _lathe(rings, bottom, top, n):
 
 def primitive_geometry(prims, n=16, n_rings=7):
     """Mesh vertices (reference frame), faces and the segment of every vertex of primitives."""
-    from ..core.imaging.render import ELLIPSOID
+    from ..core.body.primitives import ELLIPSOID
 
     verts, faces, seg = [], [], []
     offset = 0

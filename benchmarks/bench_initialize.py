@@ -218,9 +218,9 @@ def body_model_cases(table, rng, n):
 
 def cmu_joints(name):
     """The standard joints of a CMU take of the shared data, at 30 fps."""
-    from zoopraxis.core.files import bvh
+    from zoopraxis.core.files import cmu
 
-    return bvh.standard_joints(bvh.load_cmu(CMU / f"{name}.bvh", fps=30))
+    return cmu.standard_joints(cmu.load_cmu(CMU / f"{name}.bvh", fps=30))
 
 
 def aim_at(X):
@@ -619,7 +619,7 @@ def held_out_subjects_cases(table, rng, n):
     prior of the other performers (``initialize(..., proportions=...)``); and, beside them,
     the performer's true lengths kept. Each row also apart for the performers captured with
     their own lengths and for those on cgspeed's one Daz figure."""
-    from zoopraxis.core.files import bvh
+    from zoopraxis.core.files import cmu
     from zoopraxis.core.body import fit3d
     from zoopraxis.core.priors.proportions import ProportionsPrior
 
@@ -627,8 +627,8 @@ def held_out_subjects_cases(table, rng, n):
         print(f"  (no data at {MORE}: held-out subject cases skipped)", file=sys.stderr)
         return
     takes = {}
-    for path in bvh.capture_paths(MORE, CMU):
-        takes.setdefault(bvh.subject_of(path.stem), []).append(path)
+    for path in cmu.capture_paths(MORE, CMU):
+        takes.setdefault(cmu.subject_of(path.stem), []).append(path)
     rows = {}
     per_subject = max(1, n // 5)
     for fold in SUBJECT_FOLDS:
@@ -646,7 +646,7 @@ def held_out_subjects_cases(table, rng, n):
         for subject in fold:
             for _ in range(per_subject):
                 path = takes[subject][rng.integers(len(takes[subject]))]
-                take = bvh.read_take(path)
+                take = cmu.read_take(path)
                 joints = take.joints(30)
                 X = joints[rng.integers(len(joints))]
                 cams = ring(1, rng, FHD_100M, aim_at(X))

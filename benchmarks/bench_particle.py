@@ -45,6 +45,7 @@ import cv2
 import numpy as np
 
 from zoopraxis.core.priors import motion_prior
+from zoopraxis.core.priors import walking
 from zoopraxis.core.trackers import particle
 from zoopraxis.core.geometry import se3
 from zoopraxis.core.synthetic import synth
@@ -184,7 +185,7 @@ def heldout_model(test=WALK_TAKE):
         else:
             learn_walk_prior.main(["--data", str(CMU), "--takes", "131_01", "131_02",
                                    "131_03", "--exclude", test, "--out", str(path)])
-    return motion_prior.WalkModel.load(path)
+    return walking.WalkModel.load(path)
 
 
 def walk_take(take=WALK_TAKE, frames=WALK_FRAMES, size=(640, 480)):
@@ -199,7 +200,7 @@ def walk_take(take=WALK_TAKE, frames=WALK_FRAMES, size=(640, 480)):
 def oracle_walk(take, model):
     """PA-MPJPE of the model's closest cycle pose to every true pose (its best case)."""
     body, _, _, joints, poses, _ = take
-    prior = motion_prior.WalkingPrior(body, model, fps=FPS)
+    prior = walking.WalkingPrior(body, model, fps=FPS)
     errors = []
     for k, pose in enumerate(poses):
         phase, c, _ = prior.fit_pose(pose)
@@ -214,7 +215,7 @@ def oracle_walk(take, model):
 def run_walk(take, n_particles, seed, model, frames=None, silhouette=0.0, layers=0):
     body, camera, images, joints, poses, masks = take
     frames = len(images) if frames is None else frames
-    prior = motion_prior.WalkingPrior(body, model, fps=FPS)
+    prior = walking.WalkingPrior(body, model, fps=FPS)
     pf = particle.ParticleFilter(body, [camera], prior, n_particles=n_particles, seed=seed,
                                  silhouette=silhouette, layers=layers)
     pf.start([images[0]], poses[0])
@@ -239,7 +240,7 @@ def main(argv=None):
     args = parser.parse_args(argv)
     if not CMU.is_dir():
         sys.exit(f"bench_particle: {CMU}: no CMU captures")
-    model = motion_prior.WalkModel.load(args.prior)
+    model = walking.WalkModel.load(args.prior)
     rows = []
     arm_particles = 1000 if args.quick else 2000
     rows.append(("arm (4 DOF, smooth)", arm_particles,

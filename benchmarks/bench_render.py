@@ -10,7 +10,8 @@ import time
 import numpy as np
 
 from zoopraxis.core.geometry.camera import PinholeCamera, look_at
-from zoopraxis.core.imaging.render import Primitives, cylinder, ellipsoid, render, render_points
+from zoopraxis.core.body.primitives import Primitives, cylinder, ellipsoid
+from zoopraxis.core.imaging.render import render, render_points
 
 RUNS = 20
 

@@ -7,7 +7,7 @@ This is how ``core/priors/data/pose_prior.npz`` is built; run it again to rebuil
 
 1. read every capture under the data folders (by default ``../shared/data/cmu_more``, 76
    takes of 17 performers in every CMU convention, and ``../shared/data/cmu_mocap``) at 30 fps
-   and take its 17 standard joints (``core.files.bvh.read_take``: the manifest's frame rates, the
+   and take its 17 standard joints (``core.files.cmu.read_take``: the manifest's frame rates, the
    T-pose frames dropped), leaving out the performers of ``--hold-out``;
 2. fit the ``full`` body to every ``step``-th frame (``initialize.take_angles``: the lengths
    measured on the joints, then each frame's root and angles), as ``zoopraxis prior`` does
@@ -27,7 +27,7 @@ import sys
 from pathlib import Path
 
 from zoopraxis import cli
-from zoopraxis.core.files import bvh
+from zoopraxis.core.files import cmu
 from zoopraxis.core.errors import ZoopraxisError
 from zoopraxis.core.priors.pose import DEFAULT_POSE_PRIOR
 
@@ -45,7 +45,7 @@ def main(argv=None):
     parser.add_argument("--force", action="store_true", help="replace an existing output")
     args = parser.parse_args(argv)
     try:
-        paths = bvh.capture_paths(*args.data, hold_out=args.hold_out)
+        paths = cmu.capture_paths(*args.data, hold_out=args.hold_out)
     except ZoopraxisError as error:
         print(f"learn_pose_prior: error: {error}", file=sys.stderr)
         return 2

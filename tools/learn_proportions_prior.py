@@ -5,7 +5,7 @@
 
 This is how ``core/priors/data/proportions_prior.npz`` is built; run it again to rebuild it. Each
 performer's lengths (``body.LENGTH_DIMS``, ``fit3d.dims_from_joints``) are measured on the
-standard joints of all his captures (``bvh.read_take``: every CMU convention, ASF/AMC too),
+standard joints of all his captures (``cmu.read_take``: every CMU convention, ASF/AMC too),
 a frame every third of a second. Captures on cgspeed's Daz figure are left out: every
 performer there has that one figure's lengths. ``--hold-out`` leaves performers out
 altogether (the shipped file has them all; ``ProportionsPrior.load(exclude=...)`` does the
@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from zoopraxis.core.files import bvh
+from zoopraxis.core.files import cmu
 from zoopraxis.core.body.body import LENGTH_DIMS
 from zoopraxis.core.commands.common import check_output
 from zoopraxis.core.errors import ZoopraxisError
@@ -40,8 +40,8 @@ def main(argv=None):
     try:
         out = check_output(args.out, args.force)
         joints = {}
-        for path in bvh.capture_paths(*args.data, hold_out=args.hold_out):
-            take = bvh.read_take(path)
+        for path in cmu.capture_paths(*args.data, hold_out=args.hold_out):
+            take = cmu.read_take(path)
             if take.skeleton == "cmu_daz":
                 continue
             joints.setdefault(take.subject, []).append(take.joints(FPS))

@@ -5,7 +5,7 @@
         [--force]
 
 By default every capture under ``../shared/data/cmu_more`` and ``../shared/data/cmu_mocap``
-(every CMU convention, ``bvh.read_take``) is searched for steady forward walking; ``--takes``
+(every CMU convention, ``cmu.read_take``) is searched for steady forward walking; ``--takes``
 names a few instead. ``--hold-out`` leaves whole performers out (leave-subjects-out: the
 benchmarks track subject 131's walk with a prior learned ``--hold-out 131``); ``--exclude``
 leaves takes out, or single cycles, ``TAKE:K`` for the K-th cycle (from 0) found in TAKE
@@ -15,7 +15,7 @@ This is how ``core/priors/data/walk_prior.npz`` is built; run it again to rebuil
 
 1. read each capture at 60 fps and take its 17 standard joints;
 2. cut the steady forward walking into gait cycles, each from the left foot passing the right
-   to the next time it does (``motion_prior.find_gait_cycles``: forward speed, plausible
+   to the next time it does (``walking.find_gait_cycles``: forward speed, plausible
    duration, hips facing the direction of travel; this drops standing starts, crouches,
    spins and side steps), and keep only the cycles with a foot on the ground throughout
    (a run's flight phases lift both, FLIGHT_M);
@@ -23,10 +23,10 @@ This is how ``core/priors/data/walk_prior.npz`` is built; run it again to rebuil
    frames of all his takes, then every frame's root and 19 angles by least squares on
    ``body.joints`` (``motion_prior.fit_body`` / ``fit_pose``);
 4. resample each cycle to 64 phase samples: the angles, the forward speed, the pelvis sway
-   and bob and its tilt relative to the direction of travel (``motion_prior.cycle_curves``),
+   and bob and its tilt relative to the direction of travel (``walking.cycle_curves``),
    the distances scaled to the template body's leg length;
    every cycle is added a second time mirrored (left and right swapped, half a cycle later);
-5. PCA over the cycles, keeping 95% of the variance (``motion_prior.learn_walk_model``).
+5. PCA over the cycles, keeping 95% of the variance (``walking.learn_walk_model``).
 """
 
 import argparse
@@ -35,8 +35,9 @@ from pathlib import Path
 
 import numpy as np
 
-from zoopraxis.core.files import bvh
+from zoopraxis.core.files import cmu
 from zoopraxis.core.priors import motion_prior
+from zoopraxis.core.priors import walking
 from zoopraxis.core.body.body import make_body
 from zoopraxis.core.errors import ZoopraxisError
 from zoopraxis.core.body.joints import JOINT_INDEX
@@ -72,13 +73,13 @@ def main(argv=None):
                         help="takes to leave out (held-out evaluation)")
     parser.add_argument("--components", type=int, default=COMPONENTS,
                         help=f"most eigencurves kept (default {COMPONENTS})")
-    parser.add_argument("--out", type=Path, default=motion_prior.DEFAULT_WALK_PRIOR)
+    parser.add_argument("--out", type=Path, default=walking.DEFAULT_WALK_PRIOR)
     parser.add_argument("--force", action="store_true", help="replace an existing output")
     args = parser.parse_args(argv)
     if args.out.exists() and not args.force:
         sys.exit(f"learn_walk_prior: {args.out} exists (use --force to replace it)")
     try:
-        paths = {p.stem: p for p in bvh.capture_paths(*args.data, hold_out=args.hold_out)}
+        paths = {p.stem: p for p in cmu.capture_paths(*args.data, hold_out=args.hold_out)}
     except ZoopraxisError as error:
         sys.exit(f"learn_walk_prior: {error}")
     if args.takes is not None:
@@ -100,9 +101,9 @@ def main(argv=None):
     for name, path in paths.items():
         if None in left_out.get(name, ()):
             continue
-        take = bvh.read_take(path)
+        take = cmu.read_take(path)
         joints = take.joints(FPS)
-        found, _ = motion_prior.find_gait_cycles(joints, FPS)
+        found, _ = walking.find_gait_cycles(joints, FPS)
         if left_out.get(name):
             print(f"{name}: leaving out cycles {sorted(left_out[name])}", flush=True)
             found = [c for k, c in enumerate(found) if k not in left_out[name]]
@@ -132,16 +133,16 @@ def main(argv=None):
                 for frame in joints[first:last + 1]:
                     pose, _ = motion_prior.fit_pose(body, frame, pose)
                     poses.append(pose)
-                curves = motion_prior.cycle_curves(body, poses, start - first, end - first,
+                curves = walking.cycle_curves(body, poses, start - first, end - first,
                                                    SAMPLES)
-                distances = [body.n_dofs + motion_prior.ROOT_CURVES.index(name)
+                distances = [body.n_dofs + walking.ROOT_CURVES.index(name)
                              for name in ("speed", "sway", "bob")]
                 curves[distances] *= scale
-                cycles += [curves, motion_prior.mirror_curves(body, curves)]
+                cycles += [curves, walking.mirror_curves(body, curves)]
                 durations += [(end - start) / FPS] * 2
     if len(cycles) < 4:
         sys.exit(f"learn_walk_prior: only {len(cycles) // 2} walking cycles found")
-    model = motion_prior.learn_walk_model(reference, np.array(cycles),
+    model = walking.learn_walk_model(reference, np.array(cycles),
                                           cycle_seconds=float(np.mean(durations)),
                                           max_components=args.components)
     args.out.parent.mkdir(parents=True, exist_ok=True)

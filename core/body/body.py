@@ -479,19 +479,6 @@ class BodyModel:
         X = se3.apply(T[:, self.landmark_segment], self.landmark_points)
         return X[0] if single else X
 
-    def spatial_twists(self, pose):
-        """World-frame twists of every DOF at ``pose`` (Bregler & Malik eq. 22).
-
-        ``xi'_j = Ad(prefix_j) xi_j``: the instantaneous motion of everything beyond DOF j per
-        unit of its angle, expressed in the world frame.
-
-        Returns
-        -------
-        twists : array, shape (n_dofs, 6)
-        """
-        prefix, _ = self._prefix_and_segments(pose.root[None], pose.angles[None])
-        return np.einsum("nij,nj->ni", se3.adjoint(prefix[0]), self.twists)
-
     def kinematics(self, pose):
         """``seg2world`` and ``segment_jacobians`` of one pose from a single pass.
 

@@ -37,13 +37,3 @@ def mirror_name(name):
 # Index permutation that swaps left and right joints.
 MIRROR_PERMUTATION = tuple(JOINT_INDEX[mirror_name(n)] for n in STANDARD_JOINTS)
 
-
-def check_joint_name(name, where=""):
-    """Raise ZoopraxisError unless ``name`` is a standard joint; ``where`` names the source."""
-    from ..errors import ZoopraxisError
-
-    if name not in JOINT_INDEX:
-        prefix = f"{where}: " if where else ""
-        raise ZoopraxisError(
-            f"{prefix}unknown joint '{name}' (expected one of {', '.join(STANDARD_JOINTS)})")
-    return JOINT_INDEX[name]

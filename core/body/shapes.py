@@ -8,7 +8,7 @@ facing -Y, subject's left at +X), each primitive attached to the segment it move
 
 import numpy as np
 
-from ..imaging.render import Primitives, cylinder, ellipsoid
+from .primitives import Primitives, cylinder, ellipsoid
 
 # Blobs reach a little past the joint centres so neighbouring segments overlap and the
 # silhouette has no gaps at the joints.
@@ -39,7 +39,7 @@ def _tube(segment, a, b, r_base, r_top):
 
 
 def body_primitives(body):
-    """Primitives of ``body`` for the renderer (see :class:`render.Primitives`)."""
+    """Primitives of ``body`` for the renderer (see :class:`primitives.Primitives`)."""
     d, p = body.dims, body._points
     seg = body.segment_index
     has = set(body.segment_names)

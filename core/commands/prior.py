@@ -50,7 +50,7 @@ def read_take_joints(path):
         raise ZoopraxisError(f"{path}: no such file")
     suffix = path.suffix.lower()
     if suffix in (".bvh", ".amc"):
-        from ..files.bvh import read_take
+        from ..files.cmu import read_take
 
         return read_take(path).joints(fps=30.0)
     if suffix == ".json":

@@ -45,13 +45,13 @@ def main(argv):
     args = build_parser().parse_args(argv)
     if args.views < 1 or args.views > 8:
         raise ZoopraxisError(f"--views must be between 1 and 8, got {args.views}")
-    from ..files import bvh
+    from ..files import cmu
 
-    motion = bvh.load_cmu(args.bvh, fps=args.fps)
+    motion = cmu.load_cmu(args.bvh, fps=args.fps)
     frames = parse_frame_range(args.frames, motion.num_frames)
     sel = list(frames)
-    joints = bvh.standard_joints(motion, frames=sel)
-    jframes = bvh.standard_joint_frames(motion, frames=sel)
+    joints = cmu.standard_joints(motion, frames=sel)
+    jframes = cmu.standard_joint_frames(motion, frames=sel)
     scene = synth.make_scene(joints, jframes, views=args.views, image_size=args.size,
                              build=args.build, noise=args.noise, clutter=args.clutter,
                              seed=args.seed)

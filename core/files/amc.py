@@ -20,7 +20,7 @@ As a Motion, every joint's rest frame is the skeleton's axes (as amc2bvh writes 
 sits at the start of bone j with OFFSET the parent bone's vector, its rotation channels
 ``Zrotation Yrotation Xrotation`` hold ``L`` as intrinsic Z Y X angles, and a bone without
 children closes with an End Site at its own vector. The root is called ``hip``, as amc2bvh
-calls it, so that such BVH files and AMC files share one skeleton (``bvh.SKELETONS``).
+calls it, so that such BVH files and AMC files share one skeleton (``cmu.SKELETONS``).
 """
 
 import math
@@ -305,7 +305,7 @@ def read_amc(path, asf=None, fps=AMC_FPS):
     Returns
     -------
     motion : Motion
-        File axes and units (for CMU: Y up, ``bvh.CMU_SCALE`` metres per unit), ``fps``.
+        File axes and units (for CMU: Y up, ``cmu.CMU_SCALE`` metres per unit), ``fps``.
 
     Raises
     ------

@@ -29,7 +29,8 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ..geometry.camera import PinholeCamera, camera_from_dict
+from ..geometry.camera import PinholeCamera
+from ..geometry.ortho import ScaledOrthoCamera
 from ..errors import ZoopraxisError
 from .inputs import check_regular_file, read_json
 from .outputs import write_text
@@ -38,6 +39,33 @@ FORMATS = {".json": "calibration.json", ".toml": "Pose2Sim / anipose TOML"}
 
 # Keys of a Pose2Sim / anipose camera table that are required.
 TOML_KEYS = ("size", "matrix", "distortions", "rotation", "translation")
+
+
+# The camera models a calibration.json entry may name in its "model" key.
+CAMERA_MODELS = {cls.model: cls for cls in (PinholeCamera, ScaledOrthoCamera)}
+
+
+def camera_from_dict(entry, source=None):
+    """Make a camera of either model from a calibration.json entry.
+
+    Parameters
+    ----------
+    entry : dict
+        A pinhole entry (DESIGN's format, no ``"model"`` key or ``"model": "pinhole"``) or a
+        scaled orthographic one (``"model": "scaled_orthographic"``).
+    source : str, optional
+        The file the entry comes from, named in error messages.
+
+    Returns
+    -------
+    camera : PinholeCamera or ScaledOrthoCamera
+    """
+    model = entry.get("model", "pinhole") if isinstance(entry, dict) else "pinhole"
+    if model not in CAMERA_MODELS:
+        prefix = f"{source}: " if source else ""
+        raise ZoopraxisError(f"{prefix}camera '{entry.get('name')}': unknown model {model!r} "
+                             f"(expected one of {', '.join(CAMERA_MODELS)})")
+    return CAMERA_MODELS[model].from_dict(entry, source)
 
 
 def read_calibration(path):

@@ -8,7 +8,7 @@ import numpy as np
 from ..body.body import LENGTH_DIMS, Pose, make_body
 from ..body.joints import STANDARD_JOINTS
 from ..errors import ZoopraxisError
-from ..geometry.camera import ScaledOrthoCamera
+from ..geometry.ortho import ScaledOrthoCamera
 
 
 @dataclass
@@ -153,7 +153,7 @@ def init_from_json(data, path="init.json"):
 
 
 def _init_from_json(data, path):
-    from ..geometry.camera import camera_from_dict
+    from .calibfile import camera_from_dict
     from ..files.plausible import check_body_dims
 
     if not isinstance(data, dict) or data.get("format") != "zoopraxis-init/1":

@@ -1,8 +1,11 @@
-"""Camera models: calibrated pinhole with lens distortion, and scaled orthographic.
+"""Cameras: the checks on camera parameters, the behaviour both camera models share, the
+calibrated pinhole camera with lens distortion, and cameras placed by hand (``look_at``,
+``ring_of_cameras``).
 
 ``PinholeCamera`` is the perspective camera of Yamamoto et al. (1998) and Sidenbladh, Black &
-Fleet (2000), with OpenCV's lens distortion; ``ScaledOrthoCamera`` is the projection of Bregler &
-Malik (1998), eq. (11), used by the uncalibrated mode.
+Fleet (2000), with OpenCV's lens distortion (:mod:`lens`); the scaled orthographic camera of the
+uncalibrated mode is in :mod:`ortho`, and ``files.calibfile.camera_from_dict`` makes either from a
+calibration.json entry.
 
 Convention:
     World: right-handed, Z up, metres. Camera: OpenCV axes (x right, y down, z forward), and the
@@ -22,6 +25,7 @@ from typing import ClassVar
 import numpy as np
 
 from ..errors import ZoopraxisError
+from .lens import distort, undistort
 
 # How far R @ R.T may stray from the identity before R is refused as a rotation. Loose enough for
 # matrices printed with 4-5 decimals in a calibration file, tight enough to catch real mistakes
@@ -223,123 +227,6 @@ def _scale_pixel(coord, factor, sampling):
         # centred there), so pixel centres scale about pixel 0, not about the image corner.
         return coord * factor
     return (coord + 0.5) * factor - 0.5
-
-
-# --- lens distortion (OpenCV's 5-coefficient model, in normalized image coordinates) -----------
-
-def _distort_xy(x, y, dist, jacobian=False):
-    """``_distort`` on separate coordinate arrays; the Jacobian as its 3 distinct entries."""
-    k1, k2, p1, p2, k3 = dist
-    r2 = x * x + y * y
-    radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-    xy2 = 2.0 * x * y
-    x_d = x * radial + p1 * xy2 + p2 * (r2 + 2.0 * x * x)
-    y_d = y * radial + p1 * (r2 + 2.0 * y * y) + p2 * xy2
-    if not jacobian:
-        return x_d, y_d
-    dradial_dr2 = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)
-    # The tangential terms are the gradient of p2 x r2 + p1 y r2, so the Jacobian is symmetric.
-    j_xx = radial + 2.0 * x * x * dradial_dr2 + 2.0 * p1 * y + 6.0 * p2 * x
-    j_xy = xy2 * dradial_dr2 + 2.0 * p1 * x + 2.0 * p2 * y
-    j_yy = radial + 2.0 * y * y * dradial_dr2 + 6.0 * p1 * y + 2.0 * p2 * x
-    return x_d, y_d, j_xx, j_xy, j_yy
-
-
-# Below this r^2 no term of the distortion model overflows (they are at most 3 r^2).
-_R2_PLAIN = 1e300
-
-
-def _no_distortion(dist):
-    """Whether all five coefficients are +0.0 (not -0.0, which changes the signs of zeros)."""
-    return not dist.any() and not np.signbit(dist).any()
-
-
-def _distort(xy, dist, jacobian=False):
-    """Apply lens distortion to normalized coordinates.
-
-    .. math:: x_d = x (1 + k_1 r^2 + k_2 r^4 + k_3 r^6) + 2 p_1 x y + p_2 (r^2 + 2 x^2)
-
-    and likewise for ``y_d`` with ``p1`` and ``p2`` exchanged.
-
-    Parameters
-    ----------
-    xy : array, shape (..., 2)
-        Undistorted normalized coordinates ``(X_c / Z_c, Y_c / Z_c)``.
-    dist : array, shape (5,)
-        ``[k1, k2, p1, p2, k3]``.
-    jacobian : bool
-        Also return ``d xy_d / d xy``.
-
-    Returns
-    -------
-    xy_d : array, shape (..., 2)
-    J : array, shape (..., 2, 2)
-        Only if ``jacobian``.
-    """
-    if not jacobian and _no_distortion(dist):
-        x, y = xy[..., 0], xy[..., 1]
-        r2 = x * x
-        r2 += y * y
-        if np.all(r2 < _R2_PLAIN):
-            # With all coefficients +0 and r^2 finite, the model's sums are x + (+0) and
-            # y + (+0) exactly (the +0 terms only turn -0 into +0): the same values.
-            return xy + 0.0
-    out = _distort_xy(xy[..., 0], xy[..., 1], dist, jacobian)
-    xy_d = np.stack(out[:2], axis=-1)
-    if not jacobian:
-        return xy_d
-    j_xx, j_xy, j_yy = out[2:]
-    J = np.stack([np.stack([j_xx, j_xy], axis=-1), np.stack([j_xy, j_yy], axis=-1)], axis=-2)
-    return xy_d, J
-
-
-def _undistort(xy_d, dist, max_iterations=30):
-    """Invert ``_distort`` by Newton's method; NaN where the lens model has no valid inverse.
-
-    Parameters
-    ----------
-    xy_d : array, shape (..., 2)
-        Distorted normalized coordinates.
-    dist : array, shape (5,)
-
-    Returns
-    -------
-    xy : array, shape (..., 2)
-        Undistorted normalized coordinates, accurate to round-off. NaN where Newton
-        does not converge or converges past the fold of the distortion polynomial (where the model
-        turns back on itself and ``det(d xy_d / d xy) <= 0``): no point in front of the lens
-        images there.
-    """
-    xy_d = np.asarray(xy_d, dtype=np.float64)
-    if not np.any(dist):
-        return xy_d.copy()
-    # Work on contiguous coordinate arrays, shrinking to the points still moving: a full image
-    # is millions of points and most converge in 3-4 steps.
-    x_target = np.ascontiguousarray(xy_d[..., 0]).ravel()
-    y_target = np.ascontiguousarray(xy_d[..., 1]).ravel()
-    x, y = x_target.copy(), y_target.copy()
-    tolerance = 1e-12 * (1.0 + np.maximum(np.abs(x_target), np.abs(y_target)))
-    valid = np.zeros(x.size, dtype=bool)
-    active = np.flatnonzero(np.isfinite(x_target) & np.isfinite(y_target))
-    for _ in range(max_iterations):
-        if active.size == 0:
-            break
-        xa, ya = x[active], y[active]
-        f_x, f_y, j_xx, j_xy, j_yy = _distort_xy(xa, ya, dist, jacobian=True)
-        r_x = f_x - x_target[active]
-        r_y = f_y - y_target[active]
-        det = j_xx * j_yy - j_xy * j_xy
-        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            # The step is taken by converged points too: at quadratic convergence it is the
-            # cheapest way from 1e-12 to round-off.
-            x[active] = xa - (j_yy * r_x - j_xy * r_y) / det
-            y[active] = ya - (j_xx * r_y - j_xy * r_x) / det
-        done = np.maximum(np.abs(r_x), np.abs(r_y)) <= tolerance[active]
-        valid[active[done & (det > 0)]] = True
-        active = active[~done]
-    x[~valid] = np.nan
-    y[~valid] = np.nan
-    return np.stack([x, y], axis=-1).reshape(xy_d.shape)
 
 
 # --- common behaviour ---------------------------------------------------------------------------
@@ -555,7 +442,7 @@ class PinholeCamera(_Camera):
         X_cam = self.cam_from_world(X)
         with np.errstate(divide="ignore", invalid="ignore"):
             xy = _perspective_divide(X_cam)
-        return self._pixels_from_normalized(_distort(xy, self.dist))
+        return self._pixels_from_normalized(distort(xy, self.dist))
 
     def project_jacobian(self, X):
         """Project world points and return the derivative of the pixels by the world point.
@@ -581,7 +468,7 @@ class PinholeCamera(_Camera):
         with np.errstate(divide="ignore", invalid="ignore"):
             inv_z = 1.0 / X_cam[..., 2]
             xy = X_cam[..., :2] * inv_z[..., None]
-        xy_d, J_dist = _distort(xy, self.dist, jacobian=True)
+        xy_d, J_dist = distort(xy, self.dist, jacobian=True)
         J_norm = np.zeros(X_cam.shape[:-1] + (2, 3))
         J_norm[..., 0, 0] = inv_z
         J_norm[..., 1, 1] = inv_z
@@ -607,7 +494,7 @@ class PinholeCamera(_Camera):
             Undistorted pixels; NaN where the lens model has no valid inverse (beyond its fold).
         """
         uv = _as_points(uv, 2)
-        return self._pixels_from_normalized(_undistort(self._normalized_from_pixels(uv), self.dist))
+        return self._pixels_from_normalized(undistort(self._normalized_from_pixels(uv), self.dist))
 
     def distort_points(self, uv_ideal):
         """Apply lens distortion to ideal pinhole pixels (the inverse of ``undistort_points``).
@@ -622,7 +509,7 @@ class PinholeCamera(_Camera):
         """
         uv_ideal = _as_points(uv_ideal, 2)
         return self._pixels_from_normalized(
-            _distort(self._normalized_from_pixels(uv_ideal), self.dist))
+            distort(self._normalized_from_pixels(uv_ideal), self.dist))
 
     def rays(self, uv):
         """Viewing rays through pixels, in world coordinates.
@@ -642,7 +529,7 @@ class PinholeCamera(_Camera):
         dirs : array, shape (..., 3)
             Unit directions in world coordinates.
         """
-        xy = _undistort(self._normalized_from_pixels(_as_points(uv, 2)), self.dist)
+        xy = undistort(self._normalized_from_pixels(_as_points(uv, 2)), self.dist)
         d_cam = np.concatenate([xy, np.ones(xy.shape[:-1] + (1,))], axis=-1)
         d_cam /= np.linalg.norm(d_cam, axis=-1, keepdims=True)
         return self.center, d_cam @ self.R
@@ -662,7 +549,7 @@ class PinholeCamera(_Camera):
         X : array, shape (..., 3)
             World points with ``project(X) == uv`` and ``depth(X) == depth``.
         """
-        xy = _undistort(self._normalized_from_pixels(_as_points(uv, 2)), self.dist)
+        xy = undistort(self._normalized_from_pixels(_as_points(uv, 2)), self.dist)
         z = np.broadcast_to(np.asarray(depth, dtype=np.float64), xy.shape[:-1])
         return self.world_from_cam(np.concatenate([xy * z[..., None], z[..., None]], axis=-1))
 
@@ -719,232 +606,6 @@ class PinholeCamera(_Camera):
         return _from_dict(cls, entry, ("name", "image_size", "K", "dist", "R", "t"), source)
 
 
-# --- the scaled orthographic camera -------------------------------------------------------------
-
-@dataclasses.dataclass(frozen=True, eq=False, repr=False)
-class ScaledOrthoCamera(_Camera):
-    """Scaled orthographic camera of Bregler & Malik (1998), eq. (11), with a principal point.
-
-    .. math:: (u, v)^T = s\\,[R X + t]_{xy} + c
-
-    Parameters
-    ----------
-    name : str
-        View name.
-    image_size : (int, int)
-        Width and height in pixels.
-    s : float
-        Scale, pixels per metre.
-    R : array_like, shape (3, 3), optional
-        Rotation world -> camera; default identity.
-    t : array_like, shape (3,), optional
-        Translation world -> camera; its z component only shifts ``depth``. Default zero.
-    c : array_like, shape (2,), optional
-        Principal point in pixels; default the image centre ``((w - 1) / 2, (h - 1) / 2)``.
-    kappa : float, optional
-        Perspective, as the inverse distance (1/m) from the camera to the world origin along
-        ``forward``; default 0 (scaled orthographic). With ``kappa > 0`` the camera is a
-        pinhole of focal length ``s / kappa`` pixels, with ``s`` the scale at the origin's
-        depth: :math:`(u, v)^T = s\\,[R X + t]_{xy} / (1 + \\kappa\\,(R X)_z) + c`. One
-        uncalibrated view of a near body fits it (:mod:`initialize`).
-
-    Convention:
-        Camera axes are OpenCV's. ``depth`` is the camera z, ``(R @ X + t)[2]``, and may be
-        negative. With ``kappa = 0`` rays are parallel, along the camera +z axis (``forward``),
-        and the camera has no centre (it is at infinity): ``center`` is None. With
-        ``kappa > 0`` they meet at ``center``, at depth ``t[2] - 1 / kappa``.
-    """
-
-    model: ClassVar[str] = "scaled_orthographic"
-
-    name: str
-    image_size: tuple
-    s: float
-    R: np.ndarray = None
-    t: np.ndarray = None
-    c: np.ndarray = None
-    kappa: float = 0.0
-
-    def __post_init__(self):
-        if not isinstance(self.name, str) or not self.name:
-            raise ZoopraxisError(f"camera name must be a non-empty string, got {self.name!r}")
-        where = f"camera '{self.name}'"
-        set_ = object.__setattr__
-        kappa = float(_as_array(self.kappa, (), f"{where}: kappa"))
-        if kappa < 0.0:
-            raise ZoopraxisError(f"{where}: kappa (1 / distance in metres) must be 0 or more, "
-                                 f"got {kappa:g}")
-        set_(self, "kappa", kappa)
-        size = check_image_size(self.image_size, f"{where}: image_size")
-        set_(self, "image_size", size)
-        s = float(_as_array(self.s, (), f"{where}: s"))
-        if s <= 0:
-            raise ZoopraxisError(f"{where}: s (pixels per metre) must be positive, got {s:g}")
-        set_(self, "s", s)
-        set_(self, "R", _frozen(np.eye(3) if self.R is None
-                                else check_rotation(self.R, f"{where}: R")))
-        set_(self, "t", _frozen(np.zeros(3) if self.t is None
-                                else _as_array(self.t, (3,), f"{where}: t")))
-        c = ((size[0] - 1) / 2, (size[1] - 1) / 2) if self.c is None else self.c
-        set_(self, "c", _frozen(_as_array(c, (2,), f"{where}: c")))
-
-    def __repr__(self):
-        kappa = f", kappa={self.kappa:.6g}" if self.kappa else ""
-        return self._short_repr(f"s={self.s:.6g}, c=({self.c[0]:.6g}, {self.c[1]:.6g}){kappa}")
-
-    @property
-    def center(self):
-        """None when ``kappa`` is 0: the camera is at infinity (use ``forward``,
-        ``pixel_rays``). Else the centre of projection in world coordinates, shape (3,)."""
-        if not self.kappa:
-            return None
-        return self.world_from_cam([0.0, 0.0, self.t[2] - 1.0 / self.kappa])
-
-    def project(self, X):
-        """Project world points to pixels, eq. (11) with a principal point (and the
-        perspective divide of ``kappa``).
-
-        Convention: world (Z up, metres) to OpenCV pixels.
-
-        Parameters
-        ----------
-        X : array_like, shape (..., 3)
-
-        Returns
-        -------
-        uv : array, shape (..., 2)
-        """
-        X = _as_points(X, 3)
-        if self.kappa:
-            Xc = X @ self.R.T
-            return self.s * (Xc[..., :2] + self.t[:2]) / (1.0 + self.kappa * Xc[..., 2:]) \
-                + self.c
-        return self.s * (X @ self.R[:2].T + self.t[:2]) + self.c
-
-    def project_jacobian(self, X):
-        """Project world points and return ``d uv / d X_world`` for each point (``s * R[:2]``
-        when ``kappa`` is 0).
-
-        Parameters
-        ----------
-        X : array_like, shape (..., 3)
-
-        Returns
-        -------
-        uv : array, shape (..., 2)
-        J : array, shape (..., 2, 3)
-        """
-        if self.kappa:
-            Xc = _as_points(X, 3) @ self.R.T
-            d = 1.0 + self.kappa * Xc[..., 2]
-            num = Xc[..., :2] + self.t[:2]
-            J = self.s * (self.R[:2] / d[..., None, None]
-                          - (num * self.kappa / d[..., None]**2)[..., None] * self.R[2])
-            return self.s * num / d[..., None] + self.c, J
-        uv = self.project(X)
-        return uv, np.broadcast_to(self.s * self.R[:2], uv.shape[:-1] + (2, 3)).copy()
-
-    def undistort_points(self, uv):
-        """Identity (a copy): the scaled orthographic model has no lens distortion."""
-        return _as_points(uv, 2).copy()
-
-    def distort_points(self, uv_ideal):
-        """Identity (a copy): the scaled orthographic model has no lens distortion."""
-        return _as_points(uv_ideal, 2).copy()
-
-    def rays(self, uv):
-        """Viewing rays through pixels, in world coordinates.
-
-        Convention: OpenCV pixels to world rays; ``origin + d * dir`` projects back to ``uv``
-        for every ``d > 0``. With ``kappa`` 0 the origin is on the plane ``z_cam = 0`` (and
-        ``d`` may be negative too); else it is the camera centre, as for a pinhole.
-
-        Parameters
-        ----------
-        uv : array_like, shape (..., 2)
-
-        Returns
-        -------
-        origins : array, shape (..., 3), or (3,) when ``kappa`` is not 0
-        dirs : array, shape (..., 3)
-            Unit directions: all equal to ``forward`` when ``kappa`` is 0.
-        """
-        if self.kappa:
-            center = self.center
-            d = self.unproject(uv, self.t[2]) - center
-            return center, d / np.linalg.norm(d, axis=-1, keepdims=True)
-        origins = self.unproject(uv, 0.0)
-        return origins, np.broadcast_to(self.R[2], origins.shape).copy()
-
-    def unproject(self, uv, depth):
-        """World points at a given camera depth on the rays through pixels.
-
-        Parameters
-        ----------
-        uv : array_like, shape (..., 2)
-        depth : array_like, shape (...) or scalar
-            Camera z of the wanted points.
-
-        Returns
-        -------
-        X : array, shape (..., 3)
-            World points with ``project(X) == uv`` and ``depth(X) == depth``.
-        """
-        xy = (_as_points(uv, 2) - self.c) / self.s
-        z = np.broadcast_to(np.asarray(depth, dtype=np.float64), xy.shape[:-1])
-        if self.kappa:
-            xy = xy * (1.0 + self.kappa * (z - self.t[2]))[..., None]
-        return self.world_from_cam(np.concatenate([xy, z[..., None]], axis=-1))
-
-    def scaled(self, factor, sampling="pyramid"):
-        """The camera that sees the same scene in the image resampled by ``factor``.
-
-        Parameters
-        ----------
-        factor : float
-            0.5 for one ``cv2.pyrDown`` level.
-        sampling : {"pyramid", "resize"}
-            As for ``PinholeCamera.scaled``.
-
-        Returns
-        -------
-        camera : ScaledOrthoCamera
-            ``s`` times ``factor``, principal point moved with the pixels (``kappa`` kept).
-        """
-        size = self._check_scaling(factor, sampling)
-        return self.replace(image_size=size, s=self.s * factor,
-                            c=_scale_pixel(self.c, factor, sampling))
-
-    def to_dict(self):
-        """The camera as a calibration.json entry, marked ``"model": "scaled_orthographic"``
-        (``kappa`` only when not 0)."""
-        entry = {"model": self.model, "name": self.name, "image_size": list(self.image_size),
-                 "s": self.s, "R": self.R.tolist(), "t": self.t.tolist(), "c": self.c.tolist()}
-        if self.kappa:
-            entry["kappa"] = self.kappa
-        return entry
-
-    @classmethod
-    def from_dict(cls, entry, source=None):
-        """Make a camera from its calibration.json entry (``c`` and ``kappa`` optional; unknown
-        keys ignored).
-
-        Parameters
-        ----------
-        entry : dict
-            With keys ``name``, ``image_size``, ``s``, ``R``, ``t`` and optionally ``c`` and
-            ``kappa``.
-        source : str, optional
-            The file the entry comes from, named in error messages.
-
-        Returns
-        -------
-        camera : ScaledOrthoCamera
-        """
-        return _from_dict(cls, entry, ("name", "image_size", "s", "R", "t"), source,
-                          ("c", "kappa"))
-
-
 def _from_dict(cls, entry, required, source, optional=()):
     prefix = f"{source}: " if source else ""
     if not isinstance(entry, dict):
@@ -958,32 +619,6 @@ def _from_dict(cls, entry, required, source, optional=()):
         return cls(**{key: entry[key] for key in required + optional if key in entry})
     except ZoopraxisError as error:
         raise ZoopraxisError(f"{prefix}{error}") from None
-
-
-CAMERA_MODELS = {cls.model: cls for cls in (PinholeCamera, ScaledOrthoCamera)}
-
-
-def camera_from_dict(entry, source=None):
-    """Make a camera of either model from a calibration.json entry.
-
-    Parameters
-    ----------
-    entry : dict
-        A pinhole entry (DESIGN's format, no ``"model"`` key or ``"model": "pinhole"``) or a
-        scaled orthographic one (``"model": "scaled_orthographic"``).
-    source : str, optional
-        The file the entry comes from, named in error messages.
-
-    Returns
-    -------
-    camera : PinholeCamera or ScaledOrthoCamera
-    """
-    model = entry.get("model", "pinhole") if isinstance(entry, dict) else "pinhole"
-    if model not in CAMERA_MODELS:
-        prefix = f"{source}: " if source else ""
-        raise ZoopraxisError(f"{prefix}camera '{entry.get('name')}': unknown model {model!r} "
-                             f"(expected one of {', '.join(CAMERA_MODELS)})")
-    return CAMERA_MODELS[model].from_dict(entry, source)
 
 
 # --- building cameras ---------------------------------------------------------------------------

@@ -48,10 +48,6 @@ class BackgroundModel:
         d = cv2.multiply(d, d)
         return cv2.transform(d, np.ones((1, 3), np.float32))    # sum over the channels
 
-    def difference(self, frame):
-        """Colour distance of a frame from the background, (H, W) float32."""
-        return np.sqrt(self.difference2(frame))
-
     def foreground(self, frame, *, k=4.0, min_level=0.06):
         """Foreground mask of a frame, (H, W) bool, cleaned of specks and small holes."""
         d2 = self.difference2(frame)

@@ -8,7 +8,7 @@ import numpy as np
 from ..body.body import LENGTH_DIMS, RADIUS_DIMS, Pose
 from ..body.kinematics import kinematics
 from ..errors import ZoopraxisError
-from ..geometry.camera import ScaledOrthoCamera
+from ..geometry.ortho import ScaledOrthoCamera
 from .problem import DIMS_RANGE, LOSS_SCALE_PX, N_JOINTS, _fit, _State
 
 

@@ -6,7 +6,7 @@ from scipy.optimize import least_squares
 
 from ..body.joints import JOINT_INDEX, STANDARD_JOINTS
 from ..geometry import se3
-from ..geometry.camera import ScaledOrthoCamera
+from ..geometry.ortho import ScaledOrthoCamera
 
 # In 3D inverse kinematics (starting points only) a prior spread costs this many metres.
 IK_PRIOR_M = 0.01

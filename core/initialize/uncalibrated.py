@@ -5,7 +5,7 @@ from the pose prior's own poses."""
 import numpy as np
 
 from ..geometry import se3
-from ..geometry.camera import ScaledOrthoCamera
+from ..geometry.ortho import ScaledOrthoCamera
 from ..geometry.triangulate import similarity_from_points
 from .fit import _Fit
 from .problem import PRIOR_WEIGHT, _fit, _rho_px, _State

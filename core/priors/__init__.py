@@ -1,4 +1,5 @@
-"""Learned priors and their data files (data/): motion priors of the particle tracker
-(motion_prior), the pose prior of one-view initialization (pose) and body proportions
-(proportions). May import core.geometry, core.body, core.files.
+"""Learned priors and their data files (data/): the smooth-motion prior and the pose parameters'
+names (motion_prior), the walking model and prior (walking), the pose prior of one-view
+initialization (pose) and body proportions (proportions). May import core.geometry, core.body,
+core.files.
 """

@@ -104,7 +104,7 @@ class PosePrior:
             Takes to leave out (to evaluate on them).
         exclude_subjects : sequence of str
             Performers to leave out: every take named ``SUBJECT_TRIAL`` of theirs (CMU's
-            naming, ``bvh.subject_of``).
+            naming, ``cmu.subject_of``).
 
         Raises
         ------
@@ -121,7 +121,7 @@ class PosePrior:
         if not (np.issubdtype(angles.dtype, np.number) and np.all(np.isfinite(angles))):
             raise ZoopraxisError(f"{path}: not a pose prior file (angles are not finite "
                                  "numbers)")
-        from ..files.bvh import subject_of
+        from ..files.cmu import subject_of
 
         subjects = np.array([subject_of(t) for t in takes])
         keep = ~np.isin(takes, list(exclude)) & ~np.isin(subjects, [str(s) for s in

@@ -18,6 +18,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from ..body import primitives
 from ..imaging import render
 from ..geometry.camera import ring_of_cameras
 from ..errors import ZoopraxisError
@@ -60,14 +61,14 @@ class SynthBody:
     ----------
     names : list of str
     materials : list of str
-    prims : render.Primitives
+    prims : primitives.Primitives
         Shapes in each segment's local frame.
     seg2world : array, shape (F, S, 4, 4)
     """
 
     names: list
     materials: list
-    prims: render.Primitives
+    prims: primitives.Primitives
     seg2world: np.ndarray
 
 
@@ -108,9 +109,9 @@ def synth_body(joints, joint_frames, build="average"):
     Parameters
     ----------
     joints : array, shape (F, 17, 3)
-        Standard joints in world metres (:func:`bvh.standard_joints`).
+        Standard joints in world metres (:func:`cmu.standard_joints`).
     joint_frames : array, shape (F, 17, 4, 4)
-        World transforms of the bone starting at each joint (:func:`bvh.standard_joint_frames`);
+        World transforms of the bone starting at each joint (:func:`cmu.standard_joint_frames`);
         their rotation sets each limb's axial twist, so textures turn with the limb.
     build : {"slim", "average", "heavy"} or float
         Radius scale of the limbs and trunk.
@@ -138,52 +139,52 @@ def synth_body(joints, joint_frames, build="average"):
     T, L = _bone_frames(J["pelvis"], J["neck"], hips)
     rx, ry = 0.62 * hip_w * scale + 0.04, 0.10 * scale
     add("hips", "trousers", T, [
-        lambda k: render.cylinder(k, (0, 0, -0.09), (0, 0, 0.45 * L), rx, 0.92 * rx,
+        lambda k: primitives.cylinder(k, (0, 0, -0.09), (0, 0, 0.45 * L), rx, 0.92 * rx,
                                   ry_ratio=ry / rx, x_dir=(1, 0, 0)),
-        lambda k: render.ellipsoid(k, (0, 0, -0.09), (rx, ry, 0.06))])
+        lambda k: primitives.ellipsoid(k, (0, 0, -0.09), (rx, ry, 0.06))])
     T, L = _bone_frames(J["pelvis"], J["neck"], shoulders)
     T_chest = T.copy()
     T_chest[..., :3, 3] = J["neck"]  # origin at the neck; the chest hangs below it
     cx, cy = 0.5 * sh_w * scale + 0.01, 0.105 * scale
     add("chest", "shirt", T_chest, [
-        lambda k: render.cylinder(k, (0, 0, -0.62 * L), (0, 0, -0.05), 0.92 * cx, cx,
+        lambda k: primitives.cylinder(k, (0, 0, -0.62 * L), (0, 0, -0.05), 0.92 * cx, cx,
                                   ry_ratio=cy / cx, x_dir=(1, 0, 0)),
-        lambda k: render.ellipsoid(k, (0, 0, -0.05), (cx, cy, 0.06)),
-        lambda k: render.ellipsoid(k, (sh_w / 2, 0, -0.05), (0.06 * scale,) * 3),
-        lambda k: render.ellipsoid(k, (-sh_w / 2, 0, -0.05), (0.06 * scale,) * 3)])
+        lambda k: primitives.ellipsoid(k, (0, 0, -0.05), (cx, cy, 0.06)),
+        lambda k: primitives.ellipsoid(k, (sh_w / 2, 0, -0.05), (0.06 * scale,) * 3),
+        lambda k: primitives.ellipsoid(k, (-sh_w / 2, 0, -0.05), (0.06 * scale,) * 3)])
     # Head and neck, oriented by the head bone.
     T, L = _bone_frames(J["neck"], J["head"], Rx["neck"])
     add("head", "skin", T, [
-        lambda k: render.cylinder(k, (0, 0, -0.02), (0, 0, 0.6 * L), 0.05, 0.048),
-        lambda k: render.ellipsoid(k, (0, 0.01, L), (0.078, 0.095, 0.115))])
+        lambda k: primitives.cylinder(k, (0, 0, -0.02), (0, 0, 0.6 * L), 0.05, 0.048),
+        lambda k: primitives.ellipsoid(k, (0, 0.01, L), (0.078, 0.095, 0.115))])
     T2 = T.copy()
-    add("hair", "hair", T2, [lambda k: render.ellipsoid(k, (0, 0.025, L + 0.035),
+    add("hair", "hair", T2, [lambda k: primitives.ellipsoid(k, (0, 0.025, L + 0.035),
                                                         (0.082, 0.092, 0.09))])
     for name, a, b, r0, r1, material in _LIMBS:
         T, L = _bone_frames(J[a], J[b], Rx[a])
         r0, r1 = r0 * scale, r1 * scale
 
         def tube(k, L=L, r0=r0, r1=r1):
-            return render.cylinder(k, (0, 0, 0), (0, 0, L), r0, r1)
+            return primitives.cylinder(k, (0, 0, 0), (0, 0, L), r0, r1)
 
         def cap0(k, r0=r0):
-            return render.ellipsoid(k, (0, 0, 0), (r0,) * 3)
+            return primitives.ellipsoid(k, (0, 0, 0), (r0,) * 3)
 
         def cap1(k, L=L, r1=r1):
-            return render.ellipsoid(k, (0, 0, L), (r1,) * 3)
+            return primitives.ellipsoid(k, (0, 0, L), (r1,) * 3)
 
         add(name, material, T, [tube, cap0, cap1])
     for s in ("l", "r"):
         T, L = _bone_frames(J[f"{s}_wrist"], J[f"{s}_wrist"] + (J[f"{s}_wrist"] - J[f"{s}_elbow"]),
                             Rx[f"{s}_wrist"])
-        add(f"{s}_hand", "skin", T, [lambda k: render.ellipsoid(k, (0, 0, 0.07),
+        add(f"{s}_hand", "skin", T, [lambda k: primitives.ellipsoid(k, (0, 0, 0.07),
                                                                 (0.025, 0.045, 0.08))])
         # Foot: from the ankle to a little past the ball, x across the foot.
         T, L = _bone_frames(J[f"{s}_ankle"], J[f"{s}_toe"], J["l_hip"] - J["r_hip"])
         add(f"{s}_foot", "shoes", T, [
-            lambda k, L=L: render.ellipsoid(k, (0, 0, 0.45 * L), (0.045, 0.05, 0.72 * L)),
-            lambda k: render.ellipsoid(k, (0, 0, 0), (0.048, 0.048, 0.05))])
-    return SynthBody(names, materials, render.Primitives.concat(prims),
+            lambda k, L=L: primitives.ellipsoid(k, (0, 0, 0.45 * L), (0.045, 0.05, 0.72 * L)),
+            lambda k: primitives.ellipsoid(k, (0, 0, 0), (0.048, 0.048, 0.05))])
+    return SynthBody(names, materials, primitives.Primitives.concat(prims),
                      np.stack(frames, axis=1))
 
 
@@ -367,7 +368,7 @@ def textured_grey(camera, seg2world, prims, textures, background, light, rng, no
     ----------
     camera : camera
     seg2world : array, shape (S, 4, 4)
-    prims : render.Primitives
+    prims : primitives.Primitives
     textures : sequence of callable
         Per segment: grey level (0-255) of points given in the segment's coordinates.
     background : array (H, W) float
@@ -536,15 +537,15 @@ def take_from_bvh(bvh_path, *, frames=None, fps=30.0, **scene_options):
     scene : Scene
     joints : array, shape (F, 17, 3)
     """
-    from ..files import bvh
+    from ..files import cmu
 
-    motion = bvh.load_cmu(bvh_path, fps=fps)
+    motion = cmu.load_cmu(bvh_path, fps=fps)
     sel = None if frames is None else np.arange(motion.num_frames)[frames]
     if sel is not None and len(sel) == 0:
         raise ZoopraxisError(f"{bvh_path}: frame range {frames} is empty "
                              f"(the capture has {motion.num_frames} frames at {fps:g} fps)")
-    joints = bvh.standard_joints(motion, frames=sel)
-    jframes = bvh.standard_joint_frames(motion, frames=sel)
+    joints = cmu.standard_joints(motion, frames=sel)
+    jframes = cmu.standard_joint_frames(motion, frames=sel)
     return make_scene(joints, jframes, **scene_options), joints
 
 

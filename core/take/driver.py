@@ -21,7 +21,7 @@ import numpy as np
 from ..errors import ZoopraxisError
 from ..files.markers import check_markers
 from ..geometry import se3
-from ..geometry.camera import ScaledOrthoCamera
+from ..geometry.ortho import ScaledOrthoCamera
 from ..trackers.differential import State, thread_pool
 from .backgrounds import anchor_references, remeasure, take_backgrounds, tracked_backgrounds
 from .passes import BLEND_REACH, blend_states, blend_weights, extend_passes, plan_passes

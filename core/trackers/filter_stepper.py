@@ -23,7 +23,8 @@ import numpy as np
 from ..errors import ZoopraxisError
 from ..imaging.background import model_coverage, silhouette_iou
 from ..imaging.plates import to_gray_float
-from ..priors.motion_prior import SmoothMotionPrior, WalkingPrior, smooth_sigmas
+from ..priors.motion_prior import SmoothMotionPrior, smooth_sigmas
+from ..priors.walking import WalkingPrior
 from .differential import DifferentialTracker, Settings, State, StepReport, prepare_images
 from .image_motion import accumulate
 from .particle import ParticleFilter

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ..imaging.render import CYLINDER
+from ..body.primitives import CYLINDER
 
 # Standard deviations of the first round of draws, radians, by joint.
 WIDTHS = {"hip": 0.5, "knee": 0.7, "ankle": 0.3, "shoulder": 0.6, "elbow": 0.7}

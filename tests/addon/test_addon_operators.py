@@ -453,6 +453,7 @@ class _Layout:
         self.log.append(("prop", name))
 
 
+@pytest.mark.slow
 def test_one_view_flips_in_depth_from_the_panel(blender):
     """Initialize from one view: the panel offers each limb of the anchor frames to flip in
     depth; a flip is remembered for Initialize and Track, runs the fit again, and a second
@@ -508,6 +509,7 @@ def test_one_view_flips_in_depth_from_the_panel(blender):
     assert settings.depth_flips == ""
 
 
+@pytest.mark.slow
 def test_one_view_camera_tilt_from_the_panel(blender):
     """The panel's "Camera Looks Down" reaches the one-view fit: the sample's level cam0 is
     fitted about level by default (within 12 degrees); said to look down 30 degrees, the
@@ -546,6 +548,7 @@ def test_flip_reports_the_initialization_error(blender):
     assert settings.depth_flips == "0:right arm"
 
 
+@pytest.mark.slow
 def test_pose_prior_file_from_the_panel(blender, tmp_path):
     """The Initialize step's "Pose Prior" file reaches the one-view fit: with a prior learned
     from the take itself (its truth, as from an earlier track of the performer) the sample's
@@ -589,6 +592,7 @@ def test_pose_prior_file_from_the_panel(blender, tmp_path):
         bpy.ops.zoopraxis.initialize()
 
 
+@pytest.mark.slow
 def test_body_lengths_file_from_the_panel(blender, tmp_path):
     """The Initialize step's "Body Lengths From" file: a one-view initialization keeps the
     lengths of a three-view init.json of the performer instead of fitting its own; the
@@ -625,6 +629,7 @@ class _PanelLayout(_Layout):
         return lambda *args, **options: self
 
 
+@pytest.mark.slow
 def test_near_cameras_from_the_panel(blender, monkeypatch):
     """The Initialize step's "Near Cameras", offered while no view is calibrated, reaches the
     one-view fit and the tracker's own initialization: the sample's cam0, 4.1 m from the

@@ -69,6 +69,7 @@ def test_track_bad_input_is_one_line(take, tmp_path, change, message):
     assert message in run.stderr and len(run.stderr.strip().splitlines()) == 1
 
 
+@pytest.mark.slow
 def test_track_one_view_with_a_limb_flipped_in_depth(take, tmp_path):
     out = tmp_path / "result.json"
     marks = json.loads((take / "markers.json").read_text())
@@ -84,6 +85,7 @@ def test_track_one_view_with_a_limb_flipped_in_depth(take, tmp_path):
     assert result_io.read_result(out).mode == "uncalibrated"
 
 
+@pytest.mark.slow
 def test_track_one_near_view_through_its_perspective(take, tmp_path):
     """--perspective: cam0 is 2.3 m from the walker. Its fitted perspective, printed as a
     camera distance (4.1 m), carries through the track: the 3D pose is closer to the truth (after
@@ -117,6 +119,7 @@ def test_track_one_near_view_through_its_perspective(take, tmp_path):
     assert error[1] < error[0] - 0.008 and error[1] < 0.045
 
 
+@pytest.mark.slow
 def test_track_one_view_keeps_the_lengths_of_a_calibrated_init(take, tmp_path):
     """--dims-from: the one-view track's body has the lengths the two calibrated views
     fitted, not lengths of its own; init takes the lengths of a result.json too."""

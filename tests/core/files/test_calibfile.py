@@ -7,8 +7,10 @@ import cv2
 import numpy as np
 import pytest
 
-from zoopraxis.core.files.calibfile import check_views, read_calibration, write_calibration
-from zoopraxis.core.geometry.camera import PinholeCamera, ScaledOrthoCamera, look_at
+from zoopraxis.core.files.calibfile import (camera_from_dict, check_views, read_calibration,
+                                             write_calibration)
+from zoopraxis.core.geometry.camera import PinholeCamera, look_at
+from zoopraxis.core.geometry.ortho import ScaledOrthoCamera
 from zoopraxis.core.errors import ZoopraxisError
 
 LENS = [-0.2, 0.05, 1e-3, 1e-3, 0.0]
@@ -209,3 +211,22 @@ def test_check_views_names_the_missing_views_and_file():
         check_views(cameras, ["zeta", "cam9"], "calibration.json")
     with pytest.raises(ZoopraxisError, match=r"no camera for views 'cam8', 'cam9'"):
         check_views(cameras, ["cam8", "cam9"], "calibration.json")
+
+
+K_OK = [[100.0, 0, 50], [0, 100.0, 40], [0, 0, 1]]
+
+
+@pytest.mark.parametrize("entry, message", [
+    ({"name": "cam3", "image_size": [64, 48], "dist": [0] * 5, "R": np.eye(3).tolist(),
+      "t": [0, 0, 0]}, r"calib\.json: camera 'cam3': missing key 'K'"),
+    ({"image_size": [64, 48]}, r"calib\.json: a camera without a name: missing key 'name'"),
+    ({"model": "fisheye", "name": "f"}, r"calib\.json: camera 'f': unknown model 'fisheye'"),
+    ({"model": "scaled_orthographic", "name": "o", "image_size": [64, 48], "R": np.eye(3).tolist(),
+      "t": [0, 0, 0]}, r"calib\.json: camera 'o': missing key 's'"),
+    ("cam0", r"calib\.json: a camera entry must be an object"),
+    ({"name": "cam3", "image_size": [64, 48], "K": K_OK, "dist": [0] * 5, "R": np.eye(3).tolist(),
+      "t": [0, 0]}, r"calib\.json: camera 'cam3': t must have shape \(3,\)"),
+])
+def test_camera_from_dict_bad_input(entry, message):
+    with pytest.raises(ZoopraxisError, match=message):
+        camera_from_dict(entry, "calib.json")

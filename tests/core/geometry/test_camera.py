@@ -1,4 +1,5 @@
-"""Tests of core.camera: pinhole and scaled orthographic cameras, look_at, ring_of_cameras."""
+"""Tests of core.geometry.camera: the pinhole camera, what both camera models share (through
+both), look_at and ring_of_cameras. The scaled orthographic camera alone is in test_ortho."""
 
 import dataclasses
 
@@ -6,9 +7,11 @@ import cv2
 import numpy as np
 import pytest
 
-from zoopraxis.core.geometry import camera
-from zoopraxis.core.geometry.camera import PinholeCamera, ScaledOrthoCamera, look_at, ring_of_cameras
+from zoopraxis.core.geometry import camera, lens
+from zoopraxis.core.geometry.camera import PinholeCamera, look_at, ring_of_cameras
+from zoopraxis.core.geometry.ortho import ScaledOrthoCamera
 from zoopraxis.core.errors import ZoopraxisError
+from zoopraxis.core.files.calibfile import camera_from_dict
 
 # Realistic lens: barrel distortion of a wide consumer lens, slight decentring.
 LENS = [-0.2, 0.05, 1e-3, 1e-3, 0.0]
@@ -57,12 +60,6 @@ def test_pinhole_defaults_and_padding():
     np.testing.assert_array_equal(cam.R, np.eye(3))
     np.testing.assert_array_equal(cam.t, np.zeros(3))
     assert "a" in repr(cam)
-
-
-def test_ortho_default_principal_point_is_image_centre():
-    cam = ScaledOrthoCamera("o", (101, 80), 10.0)
-    np.testing.assert_array_equal(cam.c, [50.0, 39.5])
-    assert cam.center is None
 
 
 def test_cameras_are_immutable(any_camera):
@@ -117,20 +114,6 @@ def test_pinhole_bad_input(changes, message):
         PinholeCamera(**fields)
 
 
-@pytest.mark.parametrize("changes, message", [
-    ({"s": 0.0}, r"camera 'o': s \(pixels per metre\) must be positive"),
-    ({"s": [1.0, 2.0]}, r"camera 'o': s must have shape \(\)"),
-    ({"c": [1.0, 2.0, 3.0]}, r"camera 'o': c must have shape \(2,\)"),
-    ({"R": np.ones((3, 3))}, r"camera 'o': R is not a rotation"),
-    ({"kappa": -0.1}, r"camera 'o': kappa \(1 / distance in metres\) must be 0 or more"),
-    ({"kappa": np.nan}, r"camera 'o': kappa contains NaN or infinity"),
-])
-def test_ortho_bad_input(changes, message):
-    fields = {"name": "o", "image_size": (64, 48), "s": 10.0, **changes}
-    with pytest.raises(ZoopraxisError, match=message):
-        ScaledOrthoCamera(**fields)
-
-
 def test_points_of_wrong_shape_are_refused(any_camera):
     with pytest.raises(ZoopraxisError, match=r"points must have shape \(\.\.\., 3\)"):
         any_camera.project(np.zeros((4, 2)))
@@ -169,22 +152,6 @@ def test_ring_of_cameras_bad_input(kwargs, message):
             "focal_px": 60.0, **kwargs}
     with pytest.raises(ZoopraxisError, match=message):
         ring_of_cameras(**args)
-
-
-@pytest.mark.parametrize("entry, message", [
-    ({"name": "cam3", "image_size": [64, 48], "dist": [0] * 5, "R": np.eye(3).tolist(),
-      "t": [0, 0, 0]}, r"calib\.json: camera 'cam3': missing key 'K'"),
-    ({"image_size": [64, 48]}, r"calib\.json: a camera without a name: missing key 'name'"),
-    ({"model": "fisheye", "name": "f"}, r"calib\.json: camera 'f': unknown model 'fisheye'"),
-    ({"model": "scaled_orthographic", "name": "o", "image_size": [64, 48], "R": np.eye(3).tolist(),
-      "t": [0, 0, 0]}, r"calib\.json: camera 'o': missing key 's'"),
-    ("cam0", r"calib\.json: a camera entry must be an object"),
-    ({"name": "cam3", "image_size": [64, 48], "K": K_OK, "dist": [0] * 5, "R": np.eye(3).tolist(),
-      "t": [0, 0]}, r"calib\.json: camera 'cam3': t must have shape \(3,\)"),
-])
-def test_camera_from_dict_bad_input(entry, message):
-    with pytest.raises(ZoopraxisError, match=message):
-        camera.camera_from_dict(entry, "calib.json")
 
 
 # --- shapes ---------------------------------------------------------------------------------------
@@ -230,14 +197,6 @@ def test_pinhole_projection_by_hand():
     np.testing.assert_allclose(distorted.project(X), [27.3171875, 75.284375], atol=1e-12)
     np.testing.assert_allclose(cam.center, -rotation_z90().T @ [0.1, 0.2, 2.0])
     np.testing.assert_allclose(cam.forward, [0.0, 0.0, 1.0])
-
-
-def test_ortho_projection_by_hand():
-    cam = ScaledOrthoCamera("o", (101, 81), 100.0, R=rotation_z90(), t=[0.1, 0.2, 3.0])
-    # R X + t = (0.4, 0.3, 1) + (0.1, 0.2, 3) = (0.5, 0.5, 4); c = (50, 40).
-    X = [0.3, -0.4, 1.0]
-    np.testing.assert_allclose(cam.project(X), [100.0, 90.0], atol=1e-12)
-    assert cam.depth(X) == pytest.approx(4.0)
 
 
 @pytest.mark.parametrize("dist", [LENS, LENS_ASYMMETRIC])
@@ -290,13 +249,6 @@ def test_undistort_marks_pixels_past_the_fold_of_the_lens():
     assert np.all(np.isfinite(ideal[0])) and np.all(np.isnan(ideal[1]))
 
 
-def test_ortho_has_no_distortion(rng):
-    cam = make_ortho()
-    uv = rng.uniform(0, 100, size=(5, 2))
-    np.testing.assert_array_equal(cam.undistort_points(uv), uv)
-    np.testing.assert_array_equal(cam.distort_points(uv), uv)
-
-
 def test_points_along_pixel_rays_project_back_to_their_pixel(any_camera, rng):
     w, h = any_camera.image_size
     origins, dirs = any_camera.pixel_rays()
@@ -307,28 +259,6 @@ def test_points_along_pixel_rays_project_back_to_their_pixel(any_camera, rng):
     if any_camera.model == "scaled_orthographic" and not any_camera.kappa:
         # Parallel rays: behind the origin plane too.
         np.testing.assert_allclose(any_camera.project(origins - distance * dirs), grid, atol=1e-8)
-
-
-def test_near_ortho_camera_is_the_pinhole_at_its_distance(rng):
-    # kappa = 1 / distance: the pinhole of focal s / kappa whose centre sits that far in front
-    # of the world origin along the view, seeing the origin's depth at s pixels per metre.
-    near = ScaledOrthoCamera("n", (640, 480), 300.0, R=rotation_z90(), t=[0.2, -0.1, 7.0],
-                             kappa=0.25)
-    f, c = 300.0 / 0.25, near.c
-    pinhole = PinholeCamera("n", (640, 480), [[f, 0, c[0]], [0, f, c[1]], [0, 0, 1]],
-                            R=rotation_z90(), t=[0.2, -0.1, 4.0])
-    X = rng.uniform(-1.0, 1.0, (30, 3))
-    np.testing.assert_allclose(near.project(X), pinhole.project(X), atol=1e-9)
-    np.testing.assert_allclose(near.center, pinhole.center, atol=1e-12)
-    assert near.replace(kappa=0.0).center is None
-    # The origin's depth keeps the scale of the scaled orthographic camera.
-    flat = near.replace(kappa=0.0)
-    on_plane = near.world_from_cam(np.c_[rng.uniform(-1, 1, (5, 2)), np.full(5, 7.0)])
-    np.testing.assert_allclose(near.project(on_plane), flat.project(on_plane), atol=1e-9)
-    origins, dirs = near.pixel_rays()
-    np.testing.assert_allclose(origins, pinhole.center, atol=1e-12)
-    np.testing.assert_allclose(dirs, pinhole.pixel_rays()[1], atol=1e-12)
-    assert "kappa=0.25" in repr(near) and "kappa" not in repr(flat)
 
 
 def test_pinhole_rays_leave_the_centre_and_ortho_rays_are_parallel():
@@ -420,7 +350,7 @@ def test_ring_of_cameras_surrounds_the_target():
 def test_dict_round_trip(any_camera, rng):
     entry = any_camera.to_dict()
     assert ("model" in entry) == (any_camera.model != "pinhole")
-    back = camera.camera_from_dict(entry)
+    back = camera_from_dict(entry)
     assert type(back) is type(any_camera) and back.name == any_camera.name
     assert back.image_size == any_camera.image_size
     X = points_in_view(rng)
@@ -446,7 +376,7 @@ def test_projection_without_distortion_equals_the_full_model(dist, rng):
     X_cam = cam.cam_from_world(X)
     with np.errstate(all="ignore"):
         xy = X_cam[:, :2] / X_cam[:, 2:]
-        x_d, y_d = camera._distort_xy(xy[:, 0], xy[:, 1], cam.dist)
+        x_d, y_d = lens.distort_xy(xy[:, 0], xy[:, 1], cam.dist)
         expected = cam._pixels_from_normalized(np.stack([x_d, y_d], axis=-1))
         uv = cam.project(X)
     assert np.array_equal(np.isnan(uv), np.isnan(expected))
@@ -457,15 +387,15 @@ def test_projection_without_distortion_equals_the_full_model(dist, rng):
     xy = np.concatenate([xy, [[np.inf, 0.0], [0.0, -np.inf], [np.nan, 1.0], [1e200, 1.0],
                               [-0.0, -0.0], [-0.0, 2.0]]])
     with np.errstate(all="ignore"):
-        x_d, y_d = camera._distort_xy(xy[:, 0], xy[:, 1], cam.dist)
-        plain = camera._distort(xy, cam.dist)
+        x_d, y_d = lens.distort_xy(xy[:, 0], xy[:, 1], cam.dist)
+        plain = lens.distort(xy, cam.dist)
     both = np.stack([x_d, y_d], axis=-1)
     fin = ~np.isnan(both)
     assert np.array_equal(np.isnan(plain), ~fin)
     assert np.array_equal(plain[fin].view(np.int64), both[fin].view(np.int64))
     # finite coordinates alone (the shortcut, when the coefficients are all +0)
     finite = np.all(np.abs(xy) < 1e100, axis=1)
-    assert np.array_equal(camera._distort(xy[finite], cam.dist).view(np.int64),
+    assert np.array_equal(lens.distort(xy[finite], cam.dist).view(np.int64),
                           both[finite].view(np.int64))
     assert (xy[finite] == 0).any() and np.signbit(xy[finite][xy[finite] == 0]).any()
 
@@ -484,7 +414,7 @@ def test_large_point_sets_project_to_the_same_bits(shape, rng):
     with np.errstate(all="ignore"):
         xy = X_cam[..., :2] / X_cam[..., 2:]
         uv = cam.project(X)
-    expected = camera._distort(xy, cam.dist) @ cam.K[:2, :2].T + cam.K[:2, 2]
+    expected = lens.distort(xy, cam.dist) @ cam.K[:2, :2].T + cam.K[:2, 2]
     assert uv.shape == shape + (2,)
     fin = ~np.isnan(expected)
     assert np.array_equal(np.isnan(uv), ~fin)

@@ -18,7 +18,8 @@ from zoopraxis.core.initialize.run import ONE_VIEW_LENGTHS_NOTE, initialize
 from zoopraxis.core.priors.pose import PosePrior, take_angles
 from zoopraxis.core.geometry import se3
 from zoopraxis.core.synthetic import synth
-from zoopraxis.core.geometry.camera import ScaledOrthoCamera, ring_of_cameras
+from zoopraxis.core.geometry.camera import ring_of_cameras
+from zoopraxis.core.geometry.ortho import ScaledOrthoCamera
 from zoopraxis.core.errors import ZoopraxisError
 from zoopraxis.core.body.joints import JOINT_INDEX, STANDARD_JOINTS
 from zoopraxis.core.files.markers import Anchor
@@ -409,7 +410,7 @@ def test_one_view_fit_of_held_out_capture_poses(shared_data):
     prior (not only as the chooser of depth signs) the median Procrustes-aligned MPJPE is
     under 60 mm (55; with the everyday-angle prior in the fit it was 70; one frame of the
     six, a pose unlike the other takes', is off by more than 120 mm either way)."""
-    from zoopraxis.core.files import bvh
+    from zoopraxis.core.files import cmu as bvh
 
     prior = PosePrior.load(exclude=["01_01"])
     joints = bvh.standard_joints(bvh.load_cmu(shared_data / "cmu_mocap" / "01_01.bvh",

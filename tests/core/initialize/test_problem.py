@@ -7,7 +7,7 @@ from zoopraxis.core.body.kinematics import kinematics
 from zoopraxis.core.initialize.problem import _Problem, _State
 from zoopraxis.core.priors.pose import default_pose_prior
 from zoopraxis.core.synthetic import synth
-from zoopraxis.core.geometry.camera import ScaledOrthoCamera
+from zoopraxis.core.geometry.ortho import ScaledOrthoCamera
 
 from tests.core.initialize.test_initialize import ring
 

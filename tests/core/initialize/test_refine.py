@@ -7,7 +7,7 @@ from zoopraxis.core.body import body as bm
 from zoopraxis.core.initialize.refine import refine_dims
 from zoopraxis.core.geometry import se3
 from zoopraxis.core.synthetic import synth
-from zoopraxis.core.geometry.camera import ScaledOrthoCamera
+from zoopraxis.core.geometry.ortho import ScaledOrthoCamera
 from zoopraxis.core.errors import ZoopraxisError
 from zoopraxis.core.body.joints import JOINT_INDEX
 

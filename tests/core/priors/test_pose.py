@@ -49,7 +49,7 @@ def test_pose_prior_file_and_exclusion():
 def test_pose_prior_learned_from_takes_saves_and_loads(tmp_path, shared_data):
     """A take's 3D joints become angles (each frame fitted within a centimetre), the prior
     holds them and their mirror images labelled with the take, and its file reads back."""
-    from zoopraxis.core.files import bvh
+    from zoopraxis.core.files import cmu as bvh
 
     joints = bvh.standard_joints(bvh.load_cmu(shared_data / "cmu_mocap" / "131_02.bvh",
                                               fps=30))
@@ -114,7 +114,7 @@ def test_prior_knows_a_stride_sets_the_legs_apart():
 def held_out_and_flipped(shared_data):
     """Angles of 131_03 every 25 frames, and the same with a thigh and an upper arm swung to
     the opposite side."""
-    from zoopraxis.core.files import bvh
+    from zoopraxis.core.files import cmu as bvh
     from zoopraxis.core.body import fit3d
 
     joints = bvh.standard_joints(bvh.load_cmu(shared_data / "cmu_mocap" / "131_03.bvh",

@@ -6,7 +6,7 @@ import pytest
 from zoopraxis.core.take import finetune as FT
 from zoopraxis.core.body import fit3d
 from zoopraxis.core.synthetic import synth
-from zoopraxis.core.take import track as T
+
 from zoopraxis.core.body.body import make_body
 from zoopraxis.core.geometry.camera import ring_of_cameras
 from zoopraxis.core.errors import ZoopraxisError
@@ -75,6 +75,7 @@ def test_silhouettes_give_the_limb_lengths():
     assert fit.body.dims["torso"] == wrong.dims["torso"]
 
 
+@pytest.mark.slow
 def test_finetune_brings_the_limbs_closer_and_the_track_no_worse(take):
     scene, joints, truth, wrong, start, cams, anchors, clean = take
     lines, calls = [], []

@@ -16,7 +16,7 @@ from zoopraxis.core.take import status as S
 from zoopraxis.core.take import workers as W
 from zoopraxis.core.trackers import stepper as stepper_module
 from zoopraxis.core.body.body import Pose
-from zoopraxis.core.geometry.camera import ScaledOrthoCamera
+from zoopraxis.core.geometry.ortho import ScaledOrthoCamera
 from zoopraxis.core.errors import ZoopraxisError
 from zoopraxis.core.body.joints import STANDARD_JOINTS
 from zoopraxis.core.files.markers import Anchor
@@ -163,6 +163,7 @@ class FrozenPlate:
         return self.images[frame]
 
 
+@pytest.mark.slow
 def test_passes_in_worker_processes_give_the_same_track(take, monkeypatch):
     """Three anchors make five passes; forked workers track them side by side, and measure
     the silhouettes of the blended frames, and the result is the one tracking them in turn
@@ -408,6 +409,7 @@ def test_blend_weights_trust_the_pass_that_holds():
     assert np.all(w[:5] < 0.05) and np.all(w < 0.35)
 
 
+@pytest.mark.slow
 def test_passes_between_anchors_meet_past_the_middle(take):
     """Each pass tracks a little past the middle; the two are blended there, and each frame
     outside that stretch comes from its nearer anchor's pass."""
@@ -434,6 +436,7 @@ def test_passes_between_anchors_meet_past_the_middle(take):
     assert calls[-1] == (16, 16) and list(res.frames) == list(range(N))
 
 
+@pytest.mark.slow
 def test_a_pass_goes_on_where_its_partner_lost_the_body(take, monkeypatch):
     scene, joints, body, poses = take
     cams = {c.name: c for c in scene.cameras}

@@ -12,8 +12,9 @@ from zoopraxis.core.imaging import plates
 from zoopraxis.core.geometry import se3
 from zoopraxis.core.synthetic import synth
 from zoopraxis.core.body.body import make_body
-from zoopraxis.core.geometry.camera import ScaledOrthoCamera, look_at, ring_of_cameras
+from zoopraxis.core.geometry.camera import look_at, ring_of_cameras
 
+from zoopraxis.core.geometry.ortho import ScaledOrthoCamera
 SIZE = (320, 240)
 
 

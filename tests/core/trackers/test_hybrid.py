@@ -81,6 +81,7 @@ def brisk_runs(brisk):
             "hybrid": run(brisk, "hybrid", particles=500)}
 
 
+@pytest.mark.slow
 def test_hybrid_tracks_a_brisk_walk(brisk, brisk_runs):
     scene, joints, body, poses = brisk
     res = brisk_runs["hybrid"]
@@ -107,12 +108,14 @@ def test_hybrid_follows_fast_motion_as_well_as_the_differential_tracker(brisk, b
     assert guided.mean() < 1.1 * alone.mean() and guided.max() < 0.06
 
 
+@pytest.mark.slow
 def test_the_same_seed_gives_the_same_track(slow):
     a, b = (run(slow, "hybrid", particles=100, frames=range(0, 3)) for _ in range(2))
     np.testing.assert_array_equal(a.joints3d, b.joints3d)
     np.testing.assert_array_equal(a.spread, b.spread)
 
 
+@pytest.mark.slow
 def test_hybrid_with_the_walking_prior(slow):
     scene, joints, body, poses = slow
     res = run(slow, "hybrid", particles=200, prior="walk")
@@ -123,6 +126,7 @@ def test_hybrid_with_the_walking_prior(slow):
 # -- the particle filter alone ------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_particle_mode_writes_spread_and_status(slow, tmp_path):
     scene, joints, body, poses = slow
     calls = []
@@ -150,6 +154,7 @@ def test_particle_mode_writes_spread_and_status(slow, tmp_path):
     assert back.extra["filter_status"] == res.extra["filter_status"]
 
 
+@pytest.mark.slow
 def test_blends_passes_between_anchors_and_tracks_before_the_first(slow):
     scene, joints, body, poses = slow
     res = run(slow, "particle", anchor_frames=(2, 5), particles=200)
@@ -160,6 +165,7 @@ def test_blends_passes_between_anchors_and_tracks_before_the_first(slow):
     assert mpjpe(res, joints).max() < 0.05
 
 
+@pytest.mark.slow
 def test_passes_between_anchors_meet_past_the_middle(slow, monkeypatch):
     """Each pass tracks to a little past the middle, and goes on when its partner lost the
     body: passes advance in turn, each with its own anchor appearance and search draws, so

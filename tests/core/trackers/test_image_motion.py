@@ -6,9 +6,10 @@ import pytest
 from zoopraxis.core.trackers import image_motion as im
 from zoopraxis.core.geometry import se3
 from zoopraxis.core.body.body import Pose, make_body
-from zoopraxis.core.geometry.camera import PinholeCamera, ScaledOrthoCamera, look_at
+from zoopraxis.core.geometry.camera import PinholeCamera, look_at
 
 
+from zoopraxis.core.geometry.ortho import ScaledOrthoCamera
 def smooth_image(rng, h=120, w=160):
     import cv2
 

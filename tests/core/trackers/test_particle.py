@@ -6,6 +6,7 @@ import pytest
 
 from tests.core.trackers.test_likelihood import arm_take
 from zoopraxis.core.priors import motion_prior
+from zoopraxis.core.priors import walking
 from zoopraxis.core.trackers import particle
 from zoopraxis.core.geometry import se3
 from zoopraxis.core.body.body import Pose, make_body
@@ -132,6 +133,7 @@ def test_filter_steps_are_reproducible_and_shaped(arm):
     assert np.all(step.spread[:6] < 1e-9)
 
 
+@pytest.mark.slow
 def test_arm_twist_is_uncertain_until_the_elbow_bends(arm):
     """The paper's arm example (§7, Fig. 4): the upper-arm twist starts uniform; while the arm
     is straight nothing shows it, and once the elbow bends the posterior concentrates near the
@@ -169,7 +171,7 @@ def test_walk_with_the_walking_prior(shared_data):
                                         image_size=(480, 360), noise=2.0, clutter=4)
     body, poses, _ = motion_prior.fit_body(make_body("sidenbladh"), joints[:1])
     errors, lost = {}, {}
-    for name, prior in (("walk", motion_prior.WalkingPrior(body, fps=30.0)),
+    for name, prior in (("walk", walking.WalkingPrior(body, fps=30.0)),
                         ("smooth", motion_prior.SmoothMotionPrior(body, fps=30.0))):
         pf = particle.ParticleFilter(body, scene.cameras, prior, n_particles=800, seed=5)
         pf.start([scene.render_frame(0, 0)[0]], poses[0])
