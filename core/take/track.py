@@ -3,7 +3,7 @@
 The entry points of the trackers: :func:`track` (Bregler & Malik's differential tracker, the
 default) and :func:`track_filter` (Sidenbladh, Black & Fleet's particle filter, alone or as the
 coarse search of the hybrid). Each fits the anchors' poses to the markers
-(:func:`initialize.initialize`, Bregler & Malik §2.6) unless given them, and runs the take
+(:func:`initialize.run.initialize_take`, Bregler & Malik §2.6) unless given them, and runs the take
 through the one driver (:func:`take.driver.run_take`) with its tracker's stepper.
 """
 
