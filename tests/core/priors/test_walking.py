@@ -7,23 +7,11 @@ import pytest
 from zoopraxis.core.geometry import se3
 from zoopraxis.core.priors import motion_prior as mp
 from zoopraxis.core.priors import walking
-from zoopraxis.core.body.body import Pose, make_body
+from zoopraxis.core.body.body import Pose
 from zoopraxis.core.errors import ZoopraxisError
 from zoopraxis.core.body.joints import JOINT_INDEX
 
-
-@pytest.fixture(scope="module")
-def body():
-    return make_body("sidenbladh")
-
-
-def random_pose(body, rng, spread=0.4):
-    """A pose with every angle well inside its limits and the elbows and knees bent."""
-    mid = 0.5 * (body.lower + body.upper)
-    half = 0.5 * (body.upper - body.lower)
-    angles = mid + spread * half * rng.uniform(-1, 1, body.n_dofs)
-    root = se3.transform(se3.exp_so3(rng.normal(0, 0.3, 3)), rng.normal(0, 1, 3))
-    return Pose(root, angles)
+from tests.core.priors.test_motion_prior import body, random_pose  # noqa: F401 (fixture)
 
 
 @pytest.fixture(scope="module")
