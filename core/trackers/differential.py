@@ -20,7 +20,6 @@ Calibrated views share one world pose (Yamamoto eqs. 8-12); uncalibrated views e
 own scaled-orthographic pose of the body and share the joint angles (B&M eq. 28).
 """
 
-import os
 from collections import OrderedDict
 from dataclasses import dataclass, field
 from functools import partial
@@ -29,11 +28,12 @@ import cv2
 import numpy as np
 
 from ..geometry import se3
-from ..imaging.background import model_coverage, signed_distance, silhouette_iou
+from ..imaging.background import model_coverage, silhouette_iou
 from ..body.body import Pose
 from ..body.collision import body_proxies, penalty_system
+from .frames import thread_pool
 from .image_motion import (Accumulated, Stack, Term, accumulate, accumulate_stacked, assemble,
-                           image_with_gradients, sample_fast)
+                           sample_fast)
 from .recover import LimbSearch, unexplained_foreground, unexplained_share
 from ..imaging.render import render, surface_points
 
@@ -74,67 +74,6 @@ class Settings:
                                       # (metres or radians)
     contour_per_level: bool = True    # render the contour at every pyramid level (False:
                                       # once per frame at the finest level, at the start pose)
-
-
-_POOLS = {}
-# a forked child has none of its parent's threads: it makes its own pools
-os.register_at_fork(after_in_child=_POOLS.clear)
-
-
-def thread_pool(name, workers):
-    """A thread pool made on first use and shared by the trackers, one per purpose."""
-    pool = _POOLS.get(name)
-    if pool is None:
-        from concurrent.futures import ThreadPoolExecutor
-
-        pool = _POOLS[name] = ThreadPoolExecutor(max_workers=workers,
-                                                 thread_name_prefix=f"zoopraxis-{name}")
-    return pool
-
-
-@dataclass
-class ViewImages:
-    """One view's frame at the tracker's working resolution.
-
-    Attributes
-    ----------
-    gray : list of array (H_l, W_l) float32
-        Gaussian pyramid of the smoothed grey image, level 0 first.
-    stacks : list of array (H_l, W_l, 3) float32
-        Each level with its gradients, for sampling.
-    foreground : array of bool (H, W) or None
-        Foreground mask from the background model (None when unreliable or absent).
-    sdf : list of array (H_l, W_l, 3) or None
-        Signed distance to the foreground boundary per level, with gradients.
-    """
-
-    gray: list
-    stacks: list
-    foreground: np.ndarray = None
-    sdf: list = None
-    known: np.ndarray = None      # where the background model has seen the background
-    person: np.ndarray = None     # the foreground without cast shadows (what the body covers)
-
-
-def prepare_images(gray, levels, smooth_sigma, foreground=None, known=None, person=None):
-    """Pyramid, gradients and silhouette distance images of one frame of one view."""
-    g = np.asarray(gray, np.float32)
-    if smooth_sigma > 0:
-        g = cv2.GaussianBlur(g, (0, 0), smooth_sigma)
-    pyr = [g]
-    for _ in range(1, levels):
-        pyr.append(cv2.pyrDown(pyr[-1]))
-    stacks = [image_with_gradients(p) for p in pyr]
-    sdf = None
-    if foreground is not None:
-        sdf = []
-        m = foreground.astype(np.float32)
-        for level in range(levels):
-            if level:
-                m = cv2.pyrDown(m)
-            sdf.append(image_with_gradients(signed_distance(m > 0.5)))
-    return ViewImages(pyr, stacks, foreground, sdf, known,
-                      foreground if person is None else person)
 
 
 @dataclass

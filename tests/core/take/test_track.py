@@ -248,7 +248,7 @@ def test_an_error_in_a_worker_process_reaches_the_caller(take, monkeypatch):
     import os
 
     parent = os.getpid()
-    prepare = D.prepare_images
+    prepare = stepper_module.prepare_images
 
     def failing(*args, **kw):
         if os.getpid() != parent:
