@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 
 from ..imaging.background import estimate_background, model_coverage, silhouette_iou
-from ..trackers.differential import thread_pool
+from ..trackers.frames import thread_pool
 from .status import MIN_ANCHOR_FIT, silhouette_measures, unexplained_fraction
 
 def take_backgrounds(tracker, source, views, frames, inside, state_at, log):

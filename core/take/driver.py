@@ -22,7 +22,8 @@ from ..errors import ZoopraxisError
 from ..files.markers import check_markers
 from ..geometry import se3
 from ..geometry.ortho import ScaledOrthoCamera
-from ..trackers.differential import State, thread_pool
+from ..trackers.differential import State
+from ..trackers.frames import thread_pool
 from .backgrounds import anchor_references, remeasure, take_backgrounds, tracked_backgrounds
 from .passes import BLEND_REACH, blend_states, blend_weights, extend_passes, plan_passes
 from .status import make_result, silhouette_measures

@@ -20,7 +20,6 @@ Calibrated views share one world pose (Yamamoto eqs. 8-12); uncalibrated views e
 own scaled-orthographic pose of the body and share the joint angles (B&M eq. 28).
 """
 
-import os
 from collections import OrderedDict
 from dataclasses import dataclass, field
 from functools import partial
@@ -29,11 +28,12 @@ import cv2
 import numpy as np
 
 from ..geometry import se3
-from ..imaging.background import model_coverage, signed_distance, silhouette_iou
+from ..imaging.background import model_coverage, silhouette_iou
 from ..body.body import Pose
 from ..body.collision import body_proxies, penalty_system
+from .frames import thread_pool
 from .image_motion import (Accumulated, Stack, Term, accumulate, accumulate_stacked, assemble,
-                           image_with_gradients, sample_fast)
+                           sample_fast)
 from .recover import LimbSearch, unexplained_foreground, unexplained_share
 from ..imaging.render import render, surface_points
 
@@ -65,71 +65,15 @@ class Settings:
                                       # the GIL between small operations)
     limb_search: bool = True          # silhouette search for limbs left behind (recover.py;
                                       # calibrated, two views or more)
+    refit_tolerance: float = 0.05     # a limb the search moved is kept when the frame's cost
+                                      # without that limb's image motion is at most this much
+                                      # higher (the refit re-solves the whole body from another
+                                      # start: the rest moves by a few per cent either way;
+                                      # realistic sets, 0.02-0.05 alike, 0.1 worse on punch02)
     tolerance: float = 1e-5           # stop a level's iterations when no parameter moves more
                                       # (metres or radians)
     contour_per_level: bool = True    # render the contour at every pyramid level (False:
                                       # once per frame at the finest level, at the start pose)
-
-
-_POOLS = {}
-# a forked child has none of its parent's threads: it makes its own pools
-os.register_at_fork(after_in_child=_POOLS.clear)
-
-
-def thread_pool(name, workers):
-    """A thread pool made on first use and shared by the trackers, one per purpose."""
-    pool = _POOLS.get(name)
-    if pool is None:
-        from concurrent.futures import ThreadPoolExecutor
-
-        pool = _POOLS[name] = ThreadPoolExecutor(max_workers=workers,
-                                                 thread_name_prefix=f"zoopraxis-{name}")
-    return pool
-
-
-@dataclass
-class ViewImages:
-    """One view's frame at the tracker's working resolution.
-
-    Attributes
-    ----------
-    gray : list of array (H_l, W_l) float32
-        Gaussian pyramid of the smoothed grey image, level 0 first.
-    stacks : list of array (H_l, W_l, 3) float32
-        Each level with its gradients, for sampling.
-    foreground : array of bool (H, W) or None
-        Foreground mask from the background model (None when unreliable or absent).
-    sdf : list of array (H_l, W_l, 3) or None
-        Signed distance to the foreground boundary per level, with gradients.
-    """
-
-    gray: list
-    stacks: list
-    foreground: np.ndarray = None
-    sdf: list = None
-    known: np.ndarray = None      # where the background model has seen the background
-    person: np.ndarray = None     # the foreground without cast shadows (what the body covers)
-
-
-def prepare_images(gray, levels, smooth_sigma, foreground=None, known=None, person=None):
-    """Pyramid, gradients and silhouette distance images of one frame of one view."""
-    g = np.asarray(gray, np.float32)
-    if smooth_sigma > 0:
-        g = cv2.GaussianBlur(g, (0, 0), smooth_sigma)
-    pyr = [g]
-    for _ in range(1, levels):
-        pyr.append(cv2.pyrDown(pyr[-1]))
-    stacks = [image_with_gradients(p) for p in pyr]
-    sdf = None
-    if foreground is not None:
-        sdf = []
-        m = foreground.astype(np.float32)
-        for level in range(levels):
-            if level:
-                m = cv2.pyrDown(m)
-            sdf.append(image_with_gradients(signed_distance(m > 0.5)))
-    return ViewImages(pyr, stacks, foreground, sdf, known,
-                      foreground if person is None else person)
 
 
 @dataclass
@@ -627,10 +571,18 @@ class DifferentialTracker:
                 state2, report2 = self._step(state_t, images_t, images_t1, previous, renders_t,
                                              proposal, flow)
                 # keep the refit only if the whole frame is explained better: the silhouettes
-                # overlap more and the least-squares cost (image motion, anchor appearance,
-                # contours) is lower
+                # overlap more, and the least-squares cost (image motion, anchor appearance,
+                # contours) is not higher. The moved limbs' image motion compares them with
+                # where they were at t, which the search found wrong: both poses are judged
+                # without it (a limb the tracker had wrong would otherwise always stay wrong).
+                moved_segments = np.concatenate([g.segments for g in self.search.groups
+                                                 if g.name in dict(moved)])
                 if (np.nanmean(report2.iou) > np.nanmean(report.iou)
-                        and report2.cost < report.cost):
+                        and self.frame_cost(state2, state_t, images_t1, renders_t, flow,
+                                            moved_segments)
+                        < (1 + self.settings.refit_tolerance)
+                        * self.frame_cost(state, state_t, images_t1, renders_t, flow,
+                                          moved_segments)):
                     report2.recovered = [name for name, _ in moved]
                     state, report = state2, report2
                     labels = [r.label for r in report.renders]
@@ -664,24 +616,7 @@ class DifferentialTracker:
                 if base_contour is None:
                     base_contour = self.contour_terms(state, finest)
                 sil = self.coarser_contour(base_contour, level, finest)
-            terms_by_view = []
-            for c in range(V):
-                # Flow and anchor appearance sample the same image: one term, two weights.
-                ft = flow[level][c]
-                parts = [Term(c, ft.segment, ft.ref_points, ft.target, ft.weight * s.flow_weight,
-                              ft.scale, "flow", ft.uv)]
-                if self.anchor_terms is not None and s.anchor_weight > 0:
-                    at = self.anchor_terms[level][c]
-                    at = at.subset(self._visible(at, state_t, level, renders_t))
-                    parts.append(Term(c, at.segment, at.ref_points, at.target,
-                                      at.weight * s.anchor_weight, at.scale, "anchor",
-                                      np.full((len(at), 2), np.nan)))
-                terms = [("flow", Term.concat(parts, "flow"), 1.0)]
-                if sil is not None and images_t1[c].sdf is not None and s.silhouette_weight > 0:
-                    st = sil[c]
-                    # distances shrink with the pyramid level: keep pixel units per level
-                    terms.append(("silhouette", st, s.silhouette_weight * 4 ** level))
-                terms_by_view.append(terms)
+            terms_by_view = self._level_terms(flow, level, state_t, renders_t, sil, images_t1)
             em = {}
             lam = s.damping
             H, g, cost, accs = self._system(state, level, terms_by_view, images_t1, em)
@@ -740,6 +675,42 @@ class DifferentialTracker:
                 iou[c] = silhouette_iou(renders[c].label >= 0, images_t1[c].foreground)
                 coverage[c] = model_coverage(renders[c].label >= 0, images_t1[c].foreground)
         return state, StepReport(residual, iou, cost, total_iters, renders, coverage)
+
+    def _level_terms(self, flow, level, state_t, renders_t, sil, images_t1, without=None):
+        """Each view's terms at one pyramid level: image motion and anchor appearance (one
+        term, two weights: they sample the same image) and the contour's. ``without``: segments
+        whose image-motion points are left out (their anchor appearance stays)."""
+        s = self.settings
+        terms_by_view = []
+        for c in range(len(flow[level])):
+            ft = flow[level][c]
+            weight = ft.weight * s.flow_weight
+            if without is not None:
+                weight = np.where(np.isin(ft.segment, without), 0.0, weight)
+            parts = [Term(c, ft.segment, ft.ref_points, ft.target, weight, ft.scale, "flow",
+                          ft.uv)]
+            if self.anchor_terms is not None and s.anchor_weight > 0:
+                at = self.anchor_terms[level][c]
+                at = at.subset(self._visible(at, state_t, level, renders_t))
+                parts.append(Term(c, at.segment, at.ref_points, at.target,
+                                  at.weight * s.anchor_weight, at.scale, "anchor",
+                                  np.full((len(at), 2), np.nan)))
+            terms = [("flow", Term.concat(parts, "flow"), 1.0)]
+            if sil is not None and images_t1[c].sdf is not None and s.silhouette_weight > 0:
+                # distances shrink with the pyramid level: keep pixel units per level
+                terms.append(("silhouette", sil[c], s.silhouette_weight * 4 ** level))
+            terms_by_view.append(terms)
+        return terms_by_view
+
+    def frame_cost(self, state, state_t, images_t1, renders_t, flow, without=None):
+        """The least-squares cost of a pose at the finest level solved: image motion, anchor
+        appearance, contours and limb overlap (``without``: segments whose image-motion points
+        are left out)."""
+        level = min(self.settings.finest, self.settings.levels - 1)
+        use_sil = images_t1[0].sdf is not None and self.settings.silhouette_weight > 0
+        sil = self.contour_terms(state, level) if use_sil else None
+        terms = self._level_terms(flow, level, state_t, renders_t, sil, images_t1, without)
+        return self._system(state, level, terms, images_t1, {}, lazy=True)[1]
 
     def _difference(self, target, state):
         """Parameter vector that moves ``state`` to ``target`` (to first order)."""

@@ -25,7 +25,8 @@ from ..imaging.background import model_coverage, silhouette_iou
 from ..imaging.plates import to_gray_float
 from ..priors.motion_prior import SmoothMotionPrior, smooth_sigmas
 from ..priors.walking import WalkingPrior
-from .differential import DifferentialTracker, Settings, State, StepReport, prepare_images
+from .differential import DifferentialTracker, Settings, State, StepReport
+from .frames import prepare_images
 from .image_motion import accumulate
 from .particle import ParticleFilter
 

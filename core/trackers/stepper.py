@@ -17,7 +17,8 @@ to prepare a frame's images, how to start a pass at an anchor's pose and how to 
 
 
 from ..imaging.plates import to_gray_float
-from .differential import DifferentialTracker, Settings, prepare_images
+from .differential import DifferentialTracker, Settings
+from .frames import prepare_images
 
 
 class Stepper:

@@ -116,6 +116,18 @@ def test_unexplained_foreground_flags_a_body_that_left_the_person(take):
     assert S.frame_status(fit0 / fit0, iou0 / iou0, 1.0, None, u0 - u0) == "ok"
 
 
+def test_a_limb_unexplained_in_two_views_makes_a_frame_uncertain():
+    """A lost limb leaves a limb-sized blob unexplained in every view that sees it; one view's
+    blob of that size alone (a sleeve, a shadow the background kept) does not."""
+    ones = [1.0, 1.0, 1.0]
+    limb = S.UNEXPLAINED_TWO_VIEWS * 1.5
+    assert S.UNEXPLAINED_TWO_VIEWS * 1.5 < S.UNEXPLAINED_UNCERTAIN
+    assert S.frame_status(ones, ones, 1.0, None, [limb, limb, 0.0]) == "uncertain"
+    assert S.frame_status(ones, ones, 1.0, None, [limb, 0.0, 0.0]) == "ok"
+    assert S.frame_status(ones, ones, 1.0, None, [limb, np.nan, np.nan]) == "ok"
+    assert S.frame_status(ones, ones, 1.0, None, [0.5 * S.UNEXPLAINED_TWO_VIEWS] * 3) == "ok"
+
+
 def test_unexplained_fraction_counts_thick_blobs_only():
     labels = np.full((60, 80), -1)
     labels[10:30, 10:30] = 0                                        # the model: 400 px
@@ -236,7 +248,7 @@ def test_an_error_in_a_worker_process_reaches_the_caller(take, monkeypatch):
     import os
 
     parent = os.getpid()
-    prepare = D.prepare_images
+    prepare = stepper_module.prepare_images
 
     def failing(*args, **kw):
         if os.getpid() != parent:

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from zoopraxis.core.trackers import differential as D
+from zoopraxis.core.trackers.frames import prepare_images
 from zoopraxis.core.imaging import plates
 from zoopraxis.core.geometry import se3
 from zoopraxis.core.synthetic import synth
@@ -48,7 +49,7 @@ def model_plates(body, poses, cams, noise=0.0):
 
 
 def prepared(frame, settings, with_masks):
-    return [D.prepare_images(g, settings.levels, settings.smooth_sigma,
+    return [prepare_images(g, settings.levels, settings.smooth_sigma,
                              m if with_masks else None) for g, m in frame]
 
 

@@ -221,3 +221,25 @@ def test_fit_after_a_search_that_moved_nothing_reuses_its_scores(body, cams, mon
     calls.clear()
     search.fit(state, kicked_sdfs, labels)
     assert len(calls) == len(search.groups)
+
+
+def test_step_recovers_a_limb_it_had_wrong_on_the_frame_before(body, cams):
+    """The tracker's leg was wrong at t (left standing while the subject kicked): its image
+    motion compares the leg with what lay under the wrong leg at t, which always favours
+    leaving the leg there; the refit is judged without the moved leg's image motion (by the
+    rest of the body, the contours and the anchor's appearance), and the leg is recovered."""
+    p0, p1 = kicked(body)
+    p2 = p1.copy()
+    p2.angles[body.dof_index("l_hip_flex")] += 0.1
+    p2.angles = body.clamp(p2.angles)
+    settings = D.Settings(limb_search=True)
+    frames = model_plates(body, [p0, p1, p2], cams)
+    ims = [prepared(f, settings, True) for f in frames]
+    tracker = D.DifferentialTracker(body, True, settings)
+    anchor = D.State(np.stack([p0.root] * 3), p0.angles.copy(), list(cams))
+    tracker.set_anchor(anchor, ims[0], tracker.render_views(anchor))
+    wrong = anchor.copy()       # frame 1 shows the kick; the tracker kept the leg down
+    state, report = tracker.step(wrong, ims[1], ims[2])
+    err = 1000 * np.linalg.norm(body.joints(state.pose()) - body.joints(p2), axis=1)
+    assert report.recovered == ["left leg"]
+    assert err.max() < 60

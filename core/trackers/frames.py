@@ -1,0 +1,72 @@
+"""One frame of one view as the trackers use it: the grey pyramid with its gradients, the
+foreground and its signed distance images; and the thread pools that prepare frames and views
+while others are tracked."""
+
+import os
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from ..imaging.background import signed_distance
+from .image_motion import image_with_gradients
+
+_POOLS = {}
+# a forked child has none of its parent's threads: it makes its own pools
+os.register_at_fork(after_in_child=_POOLS.clear)
+
+
+def thread_pool(name, workers):
+    """A thread pool made on first use and shared by the trackers, one per purpose."""
+    pool = _POOLS.get(name)
+    if pool is None:
+        from concurrent.futures import ThreadPoolExecutor
+
+        pool = _POOLS[name] = ThreadPoolExecutor(max_workers=workers,
+                                                 thread_name_prefix=f"zoopraxis-{name}")
+    return pool
+
+
+@dataclass
+class ViewImages:
+    """One view's frame at the tracker's working resolution.
+
+    Attributes
+    ----------
+    gray : list of array (H_l, W_l) float32
+        Gaussian pyramid of the smoothed grey image, level 0 first.
+    stacks : list of array (H_l, W_l, 3) float32
+        Each level with its gradients, for sampling.
+    foreground : array of bool (H, W) or None
+        Foreground mask from the background model (None when unreliable or absent).
+    sdf : list of array (H_l, W_l, 3) or None
+        Signed distance to the foreground boundary per level, with gradients.
+    """
+
+    gray: list
+    stacks: list
+    foreground: np.ndarray = None
+    sdf: list = None
+    known: np.ndarray = None      # where the background model has seen the background
+    person: np.ndarray = None     # the foreground without cast shadows (what the body covers)
+
+
+def prepare_images(gray, levels, smooth_sigma, foreground=None, known=None, person=None):
+    """Pyramid, gradients and silhouette distance images of one frame of one view."""
+    g = np.asarray(gray, np.float32)
+    if smooth_sigma > 0:
+        g = cv2.GaussianBlur(g, (0, 0), smooth_sigma)
+    pyr = [g]
+    for _ in range(1, levels):
+        pyr.append(cv2.pyrDown(pyr[-1]))
+    stacks = [image_with_gradients(p) for p in pyr]
+    sdf = None
+    if foreground is not None:
+        sdf = []
+        m = foreground.astype(np.float32)
+        for level in range(levels):
+            if level:
+                m = cv2.pyrDown(m)
+            sdf.append(image_with_gradients(signed_distance(m > 0.5)))
+    return ViewImages(pyr, stacks, foreground, sdf, known,
+                      foreground if person is None else person)
