@@ -33,6 +33,7 @@ def test_init_command_writes_init_json(tmp_path, capsys):
     assert "file exists" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_init_command_keeps_the_dims_of_an_earlier_init(tmp_path, capsys):
     """--dims-from: a one-view init keeps the lengths a three-view init of the performer
     fitted; a file without them, or of another template, is refused naming it."""
@@ -86,6 +87,7 @@ def _sample_first_anchor_in_cam0(tmp_path):
     return root, markers, marks["anchors"][0]["frame"]
 
 
+@pytest.mark.slow
 def test_init_command_one_view_with_and_without_the_pose_prior(tmp_path, capsys):
     root, markers, _ = _sample_first_anchor_in_cam0(tmp_path)
     joints = {}
@@ -150,6 +152,7 @@ def test_prior_command_learns_from_captures_tracks_and_truth(tmp_path, capsys, s
     assert not (tmp_path / "x.npz").exists()
 
 
+@pytest.mark.slow
 def test_init_and_track_commands_take_a_pose_prior_file(tmp_path, capsys):
     """``--pose-prior FILE`` decides the depth of a frame clicked in one view: the sample's
     last anchor in cam2 alone is 88 mm off the truth (Procrustes-aligned) with the shipped
@@ -187,6 +190,7 @@ def test_init_and_track_commands_take_a_pose_prior_file(tmp_path, capsys):
     assert not (tmp_path / "bad.json").exists()
 
 
+@pytest.mark.slow
 def test_init_and_track_commands_take_the_camera_tilt(tmp_path, capsys):
     """``--camera-tilt DOWN[:SPREAD]`` reaches the one-view fit (the sample's cam0 looks at the
     walker about level; told 30 degrees down, give or take 3, the fitted camera looks down
@@ -217,6 +221,7 @@ def test_init_and_track_commands_take_the_camera_tilt(tmp_path, capsys):
         assert "--camera-tilt is for uncalibrated views" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_init_command_flips_a_limb_and_says_how(tmp_path, capsys):
     root, markers, frame = _sample_first_anchor_in_cam0(tmp_path)
     base = ["init", "--markers", str(markers), f"--plate=cam0={root}cam0"]
@@ -243,6 +248,7 @@ def test_init_command_flips_a_limb_and_says_how(tmp_path, capsys):
     assert "--flip 'tail': expected FRAME:PART" in err and len(err.strip().splitlines()) == 1
 
 
+@pytest.mark.slow
 def test_init_command_fits_a_near_views_perspective(tmp_path, capsys):
     """``init --perspective``: the sample's cam0, 4.1 m from the walker, gets a camera
     distance near that, printed and kept in init.json, which reads back to the same camera;

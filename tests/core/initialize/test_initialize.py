@@ -105,6 +105,7 @@ def test_uncalibrated_one_view_procrustes_error(rng):
     assert np.mean(errors) < 0.040
 
 
+@pytest.mark.slow
 def test_one_near_view_fits_its_perspective(rng):
     """One uncalibrated 720p view 4 m from the body (a phone's field of view): the scaled
     orthographic fit bends the pose to meet the perspective of the clicks; with
@@ -188,6 +189,7 @@ def test_fixed_dims_are_kept(rng):
     assert mpjpe(result.joints3d(0), X) < 0.02
 
 
+@pytest.mark.slow
 def test_lengths_fitted_in_one_view_come_with_a_note(rng):
     """Lengths fitted to anchor frames that are each clicked in one view (here in two different
     calibrated views) get a note that points to the performer's lengths from several views;
@@ -240,6 +242,7 @@ def test_outlying_click_is_named_and_does_not_drag_the_fit(rng):
     assert mpjpe(result.joints3d(0), X) < 0.025
 
 
+@pytest.mark.slow
 def test_arm_pointing_along_the_view_is_reported_ambiguous(rng):
     """Seen from the front by a scaled orthographic camera, a straight arm raised forwards
     projects exactly like one raised backwards by the same angle (and the prior cannot tell
@@ -281,6 +284,7 @@ def _flat_prior():
     return flat
 
 
+@pytest.mark.slow
 def test_animator_flips_an_ambiguous_limb_to_its_other_depth(rng):
     """The fit names the left arm as ambiguous; flipping it gives the other pose that fits the
     clicks: the wrist on the other side of the shoulder in depth, one of the two poses the
@@ -332,6 +336,7 @@ def test_flips_are_checked_and_ignored_where_the_depth_is_seen(rng):
 # -- the learned pose prior in the one-view fit ----------------------------------------------
 
 
+@pytest.mark.slow
 def test_one_view_search_starts_from_the_priors_nearest_poses(monkeypatch):
     """A frame seen in one view is also searched from the prior's own poses that project
     nearest to the clicks: with a prior of the performer's take, the sample's last anchor seen
@@ -362,6 +367,7 @@ def _lean(R):
     return float(np.degrees(np.arcsin(np.clip(R[2, 2], -1.0, 1.0))))
 
 
+@pytest.mark.slow
 def test_one_view_camera_tilt_prior_keeps_the_body_upright():
     """One uncalibrated view cannot see how the body leans towards or away from it. Without
     the camera tilt prior the fit leans upright everyday poses seen by a level camera by up
@@ -386,6 +392,7 @@ def test_one_view_camera_tilt_prior_keeps_the_body_upright():
     assert np.mean(errors["prior"]) < 0.8 * np.mean(errors["none"])
 
 
+@pytest.mark.slow
 def test_one_view_camera_tilt_is_the_animators_to_set(rng):
     """A camera said to look down 30 degrees (give or take 3) gets about that look at the
     body (25 degrees: the level view's clicks resist a little), the default one a level look;
@@ -404,6 +411,7 @@ def test_one_view_camera_tilt_is_the_animators_to_set(rng):
             initialize([anchor], {"cam0": cam}, calibrated=False, camera_tilt=bad)
 
 
+@pytest.mark.slow
 def test_one_view_fit_of_held_out_capture_poses(shared_data):
     """One uncalibrated view, 2 px clicks, of frames of a subject the prior never saw (01_01;
     the prior learned on subject 131's takes only): with the learned prior as the fit's angle
@@ -459,6 +467,7 @@ _EVERYDAY_10M_JOINTS = [
     (-0.579, -0.007, 0.060), (-0.609, -0.174, 0.050)]
 
 
+@pytest.mark.slow
 def test_one_view_everyday_pose_the_prior_alone_would_lead_astray():
     """An everyday pose unlike the captures' in one view: the depth signs the clicks favour
     are found although the learned prior pulls the local fits towards the captures' poses
