@@ -226,3 +226,21 @@ def test_bake_command_writes_blend_bvh_fbx(tmp_path):
                               str(tmp_path / "nope.json"), "--bvh", str(tmp_path / "x.bvh")],
                              capture_output=True, text=True, timeout=300, cwd=tmp_path)
     assert missing.returncode == 2 and "no such result file" in missing.stderr
+
+
+@pytest.mark.slow
+def test_demo_inside_blender_bakes_through_the_command_table(blender, tmp_path, capsys):
+    """With bpy loaded (``blender --command zoopraxis demo``), the demo bakes in this process
+    through the root command table (core never imports the add-on) and writes every output."""
+    import re
+
+    from zoopraxis import cli
+
+    out = tmp_path / "demo"
+    assert cli.main(["demo", "--out", str(out)]) == 0
+    for name in ("result.json", "take.blend", "take.bvh", "take.fbx", "contact_sheet.png"):
+        assert (out / name).stat().st_size > 0, name
+    said = capsys.readouterr().out
+    assert "zoopraxis bake: wrote" in said
+    mpjpe = float(re.search(r"MPJPE ([0-9.]+) mm", said).group(1))
+    assert mpjpe < 40
