@@ -67,6 +67,14 @@ def parse_flip(text):
     return frame, name
 
 
+def add_flip_argument(parser):
+    """``--flip FRAME:PART``: a body part turned to its other depth at a one-view anchor."""
+    parser.add_argument("--flip", action="append", default=[], metavar="FRAME:PART",
+                        help="at an anchor frame clicked in one view, turn a body part to its "
+                             "other depth (PART: left-arm, right-arm, left-leg, right-leg or "
+                             "body); repeat for more")
+
+
 def add_camera_tilt_argument(parser):
     """``--camera-tilt DOWN[:SPREAD]`` for frames clicked in one uncalibrated view."""
     from ..initialize.options import CAMERA_TILT_DEG

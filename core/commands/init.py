@@ -4,7 +4,8 @@ import argparse
 import json
 import sys
 
-from .common import (add_camera_tilt_argument, add_dims_argument, add_output_arguments,
+from .common import (add_camera_tilt_argument, add_dims_argument, add_flip_argument,
+                     add_output_arguments,
                      add_perspective_argument, add_pose_prior_arguments, check_output,
                      check_template, parse_init_options)
 from ..errors import ZoopraxisError
@@ -27,10 +28,7 @@ def build_parser():
                    help="keep the template's body dimensions instead of fitting them")
     add_dims_argument(p)
     add_pose_prior_arguments(p)
-    p.add_argument("--flip", action="append", default=[], metavar="FRAME:PART",
-                   help="at an anchor frame clicked in one view, turn a body part to its other "
-                        "depth (PART: left-arm, right-arm, left-leg, right-leg or body); "
-                        "repeat for more")
+    add_flip_argument(p)
     add_camera_tilt_argument(p)
     add_perspective_argument(p)
     add_output_arguments(p, "init.json")

@@ -3,7 +3,8 @@
 import argparse
 import time
 
-from .common import (add_camera_tilt_argument, add_dims_argument, add_output_arguments,
+from .common import (add_camera_tilt_argument, add_dims_argument, add_flip_argument,
+                     add_output_arguments,
                      add_perspective_argument, add_pose_prior_arguments, check_output,
                      open_plates, parse_init_options, parse_view_values)
 from ..errors import ZoopraxisError
@@ -44,10 +45,7 @@ def build_parser():
                    help="after tracking, refine the limb lengths on the silhouettes and clicks "
                         "of the whole take and track again, keeping the better track "
                         "(differential tracker, calibrated views)")
-    p.add_argument("--flip", action="append", default=[], metavar="FRAME:PART",
-                   help="at an anchor frame clicked in one view, turn a body part to its other "
-                        "depth (PART: left-arm, right-arm, left-leg, right-leg or body); "
-                        "repeat for more")
+    add_flip_argument(p)
     add_camera_tilt_argument(p)
     add_perspective_argument(p)
     add_pose_prior_arguments(p)

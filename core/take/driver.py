@@ -26,7 +26,7 @@ from ..trackers.differential import State
 from ..trackers.frames import thread_pool
 from .backgrounds import anchor_references, remeasure, take_backgrounds, tracked_backgrounds
 from .passes import BLEND_REACH, blend_states, blend_weights, extend_passes, plan_passes
-from .status import make_result, silhouette_measures
+from .status import blend_report, make_result, silhouette_measures
 from .workers import (Cancelled, _can_fork, _Later, _run_in_processes, _run_in_turn,
                       default_cores)
 
@@ -447,7 +447,8 @@ def run_take(stepper, plates, cameras, init, views, offsets, frames, inside, *, 
                     states[f] = state
                     # measured by a worker, or here (a cancel stopped the measuring jobs)
                     fit = measured.get(f) or blended_fit(state, f)
-                    reports[f] = stepper.blend_report(fwd[f][1], bwd[f][1], w, fit)
+                    reports[f] = stepper.blend_report(
+                        blend_report(fwd[f][1], bwd[f][1], w, fit), fwd[f][1], bwd[f][1], w)
             # frames only one pass tracked (or a pair cut short by a cancel): keep them all
             for part in (fwd, bwd):
                 for f, (st, rep) in part.items():

@@ -29,6 +29,7 @@ from .differential import DifferentialTracker, Settings, State, StepReport
 from .frames import prepare_images
 from .image_motion import accumulate
 from .particle import ParticleFilter
+from .stepper import Stepper
 
 PRIORS = ("smooth", "walk")
 
@@ -146,7 +147,7 @@ class FilterFrame:
     images: list
 
 
-class ParticleStepper:
+class ParticleStepper(Stepper):
     """The particle filter alone, one filter step per frame.
 
     Parameters
@@ -216,12 +217,6 @@ class ParticleStepper:
         self.diff = self.make_tracker(body)
         return self.diff
 
-    def attach(self, take):
-        self.take = take
-
-    def rounds(self, use_bg):
-        return 1
-
     def make_prior(self):
         if self.prior == "walk":
             return WalkingPrior(self.body, fps=self.fps)
@@ -261,14 +256,12 @@ class ParticleStepper:
         """The frame's status from the silhouette's and the filter's own."""
         return worse(status, filter_status)
 
-    def blend_report(self, forward, backward, w, measured):
-        from ..take.status import blend_report
-
-        out = blend_report(forward, backward, w, measured)
+    def blend_report(self, blended, forward, backward, w):
         near = forward if w < 0.5 else backward
-        out.spread = (1 - w) * forward.spread + w * backward.spread
-        out.filter_status, out.ess, out.covered = near.filter_status, near.ess, near.covered
-        return out
+        blended.spread = (1 - w) * forward.spread + w * backward.spread
+        blended.filter_status, blended.ess, blended.covered = (near.filter_status, near.ess,
+                                                               near.covered)
+        return blended
 
     def finish(self, result, reports, anchor_frames):
         """The filter's spread, status and effective sample size in the result: at an anchor

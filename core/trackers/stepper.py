@@ -83,11 +83,10 @@ class Stepper:
         """
         raise NotImplementedError
 
-    def blend_report(self, forward, backward, w, measured):
-        """The report of a frame blended from two passes (``w``: 0 -> forward)."""
-        from ..take.status import blend_report
-
-        return blend_report(forward, backward, w, measured)
+    def blend_report(self, blended, forward, backward, w):
+        """Add what is the tracker's own to the report of a frame blended from two passes
+        (``blended``, made by the driver; ``w``: 0 -> forward); return it."""
+        return blended
 
     def finish(self, result, reports, anchor_frames):
         """Add what is the tracker's own to the result; return it."""
