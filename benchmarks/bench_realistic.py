@@ -6,7 +6,7 @@ Each run goes through ``../shared/bench/run_set.py``, which runs ``python -m zoo
 as a user would (clicks: the true 2D joints of frame 0 plus 2 px of noise) and scores it.
 
     .venv/bin/python benchmarks/bench_realistic.py [--sets a,b] [--trackers default,hybrid]
-        [--keep DIR] [--extra-sets DIR]
+        [--keep DIR] [--extra-sets DIR] [--click-seeds 7,8,9]
 
 Columns: MPJPE and Procrustes-aligned PA-MPJPE (mm), frames lost (the tracker said "lost" or
 MPJPE over 150 mm; for one view, PA-MPJPE over 150 mm), knee and elbow flexion RMSE (degrees),
@@ -16,6 +16,11 @@ frames called lost with no joint over 150 mm (false alarms: nothing to fix), fra
 that are under 50 mm, over all frames called ok.
 ``--extra-sets DIR`` adds every set folder under DIR (sets rendered with
 ``../shared/bench/render``; they stay outside the repository).
+
+``--click-seeds`` runs each set and tracker once per seed of the clicks' 2 px noise (run_set.py
+draws it with seed 7) and adds a line with the mean and the range over the seeds. A tracker that
+loses a limb can lose it or not from one set of clicks to the next; a change smaller than that
+range on one set is not a change.
 """
 
 import argparse
@@ -65,10 +70,23 @@ def status_agreement(set_dir, result_path, single_view):
             "statuses": f"{int(ok.sum())}/{int(np.sum(status == 'uncertain'))}/{int(lost.sum())}"}
 
 
-def run(set_dir, tracker, keep):
-    keep = Path(keep) / f"{set_dir.name}_{tracker}"
-    cmd = [str(ROOT / ".venv" / "bin" / "python"), str(bench_dir() / "run_set.py"),
-           "--set", str(set_dir), "--keep", str(keep)]
+# run_set.py's seed of the click noise.
+RUN_SET_SEED = 7
+
+# run_set.py with another seed of the click noise (its one scorer, unchanged otherwise):
+# python -c WITH_SEED BENCH_DIR SEED [run_set arguments]
+WITH_SEED = ("import sys; sys.path.insert(0, sys.argv.pop(1)); seed = int(sys.argv.pop(1)); "
+             "import run_set; run_set.write_inputs.__defaults__ = (seed,); "
+             "sys.exit(run_set.main())")
+
+
+def run(set_dir, tracker, keep, seed=RUN_SET_SEED):
+    keep = Path(keep) / (f"{set_dir.name}_{tracker}" if seed == RUN_SET_SEED
+                         else f"{set_dir.name}_{tracker}_clicks{seed}")
+    python = str(ROOT / ".venv" / "bin" / "python")
+    cmd = [python, str(bench_dir() / "run_set.py")] if seed == RUN_SET_SEED else \
+        [python, "-c", WITH_SEED, str(bench_dir()), str(seed)]
+    cmd += ["--set", str(set_dir), "--keep", str(keep)]
     if tracker != "default":
         cmd += ["--tracker", tracker]
     p = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
@@ -85,13 +103,31 @@ def run(set_dir, tracker, keep):
     return out
 
 
+def spread_line(name, tracker, runs):
+    """Mean and range over click seeds of MPJPE, PA-MPJPE, lost frames and joint angles."""
+    def stat(key, fmt):
+        x = np.array([r[key] for r in runs], float)
+        return f"{key} {x.mean():{fmt}} ({x.min():{fmt}}-{x.max():{fmt}})"
+
+    return (f"{name:16} {tracker:9} {'mean':>6}  " + ", ".join(
+        stat(k, f) for k, f in (("mpjpe", ".1f"), ("pa", ".1f"), ("lost", ".0f"),
+                                ("knee", ".1f"), ("elbow", ".1f"), ("fps", ".2f"))))
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sets", help="comma-separated set names (default: all)")
     ap.add_argument("--trackers", default=",".join(TRACKERS))
     ap.add_argument("--extra-sets", help="a folder of more sets (each with gt.npz)")
     ap.add_argument("--keep", help="keep each run's inputs and result.json here")
+    ap.add_argument("--click-seeds", default=str(RUN_SET_SEED),
+                    help="comma-separated seeds of the clicks' noise (default: run_set.py's)")
     a = ap.parse_args()
+    try:
+        seeds = [int(x) for x in a.click_seeds.split(",")]
+    except ValueError:
+        print(f"--click-seeds: expected whole numbers separated by commas, got {a.click_seeds!r}")
+        return 2
     roots = [bench_dir() / "sets"] + ([Path(a.extra_sets)] if a.extra_sets else [])
     sets = sorted((d for r in roots if r.is_dir() for d in r.iterdir()
                    if (d / "gt.npz").exists()), key=lambda d: d.name)
@@ -102,22 +138,27 @@ def main():
         print(f"no sets found under {', '.join(map(str, roots))}")
         return 2
     keep = a.keep or tempfile.mkdtemp(prefix="zp-realistic-")
-    head = (f"{'set':16} {'tracker':9} {'views':>5} {'MPJPE':>6} {'PA':>6} {'lost':>5} "
-            f"{'PAlost':>6} {'knee':>5} {'elbow':>5} {'fps':>5}  {'ok/unc/lost':>11} "
+    head = (f"{'set':16} {'tracker':9} {'clicks':>6} {'views':>5} {'MPJPE':>6} {'PA':>6} "
+            f"{'lost':>5} {'PAlost':>6} {'knee':>5} {'elbow':>5} {'fps':>5}  {'ok/unc/lost':>11} "
             f"{'ok>150':>6} {'lost<150':>8} {'lost-fine':>9} {'ok<50':>7}")
     print(head)
     print("-" * len(head))
     for d in sets:
         for tracker in a.trackers.split(","):
-            r = run(d, tracker, keep)
-            if "error" in r:
-                print(f"{d.name:16} {tracker:9} failed: {r['error']}")
-                continue
-            print(f"{d.name:16} {tracker:9} {r['views']:5d} {r['mpjpe']:6.1f} {r['pa']:6.1f} "
-                  f"{r['lost']:5d} {r['pa_lost']:6d} {r['knee']:5.1f} {r['elbow']:5.1f} "
-                  f"{r['fps']:5.2f}  {r['statuses']:>11} {r['ok_over_150']:6d} "
-                  f"{r['lost_under_150']:8d} {r['lost_nothing']:9d} {r['ok_good']:>7}",
-                  flush=True)
+            runs = []
+            for seed in seeds:
+                r = run(d, tracker, keep, seed)
+                if "error" in r:
+                    print(f"{d.name:16} {tracker:9} {seed:6d} failed: {r['error']}")
+                    continue
+                runs.append(r)
+                print(f"{d.name:16} {tracker:9} {seed:6d} {r['views']:5d} {r['mpjpe']:6.1f} "
+                      f"{r['pa']:6.1f} {r['lost']:5d} {r['pa_lost']:6d} {r['knee']:5.1f} "
+                      f"{r['elbow']:5.1f} {r['fps']:5.2f}  {r['statuses']:>11} "
+                      f"{r['ok_over_150']:6d} {r['lost_under_150']:8d} {r['lost_nothing']:9d} "
+                      f"{r['ok_good']:>7}", flush=True)
+            if len(runs) > 1:
+                print(spread_line(d.name, tracker, runs), flush=True)
     print(f"(runs kept in {keep}; lost: said lost or MPJPE > 150 mm, PA-MPJPE for one view; "
           "PAlost: PA-MPJPE > 150 mm; ok>150, lost<150: frames called ok over 150 mm and called "
           "lost under it; lost-fine: called lost with no joint over 150 mm; ok<50: frames "

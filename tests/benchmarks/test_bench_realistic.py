@@ -1,0 +1,43 @@
+"""The realistic benchmark's repeated runs with other click noise (benchmarks/bench_realistic.py)."""
+
+import importlib.util
+import subprocess
+import sys
+
+from conftest import REPO
+
+
+def _bench():
+    spec = importlib.util.spec_from_file_location("bench_realistic",
+                                                  REPO / "benchmarks" / "bench_realistic.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_other_click_seeds_reach_run_set(tmp_path):
+    # A stand-in for ../shared/bench/run_set.py with its signature: the seed of the click
+    # noise is write_inputs' last default, and main() parses the command line.
+    (tmp_path / "run_set.py").write_text(
+        "import argparse\n"
+        "def write_inputs(gt, d, out, noise_px, frame0, uncalibrated, seed=7):\n"
+        "    return seed\n"
+        "def main():\n"
+        "    ap = argparse.ArgumentParser(); ap.add_argument('--set')\n"
+        "    a = ap.parse_args()\n"
+        "    print(a.set, write_inputs(None, None, None, 2.0, 0, False))\n"
+        "    return 0\n")
+    bench = _bench()
+    out = subprocess.run([sys.executable, "-c", bench.WITH_SEED, str(tmp_path), "11",
+                          "--set", "walk"], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["walk", "11"]
+
+
+def test_spread_line_gives_mean_and_range():
+    bench = _bench()
+    runs = [{"mpjpe": m, "pa": m - 5, "lost": lost, "knee": 6.0, "elbow": 20.0, "fps": 3.0}
+            for m, lost in ((30.0, 0), (50.0, 4), (40.0, 2))]
+    line = bench.spread_line("punch02", "default", runs)
+    assert "mpjpe 40.0 (30.0-50.0)" in line
+    assert "lost 2 (0-4)" in line
+    assert line.startswith("punch02")
