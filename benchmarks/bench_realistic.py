@@ -6,7 +6,7 @@ Each run goes through ``../shared/bench/run_set.py``, which runs ``python -m zoo
 as a user would (clicks: the true 2D joints of frame 0 plus 2 px of noise) and scores it.
 
     .venv/bin/python benchmarks/bench_realistic.py [--sets a,b] [--trackers default,hybrid]
-        [--keep DIR] [--extra-sets DIR]
+        [--keep DIR] [--extra-sets DIR] [--track-args "--motion-prior general"]
 
 Columns: MPJPE and Procrustes-aligned PA-MPJPE (mm), frames lost (the tracker said "lost" or
 MPJPE over 150 mm; for one view, PA-MPJPE over 150 mm), knee and elbow flexion RMSE (degrees),
@@ -15,13 +15,16 @@ error: frames over 150 mm called ok (must be 0), frames called lost that are und
 frames called lost with no joint over 150 mm (false alarms: nothing to fix), frames called ok
 that are under 50 mm, over all frames called ok.
 ``--extra-sets DIR`` adds every set folder under DIR (sets rendered with
-``../shared/bench/render``; they stay outside the repository).
+``../shared/bench/render``; they stay outside the repository). ``--track-args`` adds options to
+every ``zoopraxis track`` that run_set.py runs (it has no option for that): run_set.py then
+runs from a scratch folder whose ``.venv/bin/python`` is a script that adds them (POSIX only).
 """
 
 import argparse
 import json
 import os
 import re
+import shlex
 import subprocess
 import sys
 import tempfile
@@ -65,13 +68,28 @@ def status_agreement(set_dir, result_path, single_view):
             "statuses": f"{int(ok.sum())}/{int(np.sum(status == 'uncertain'))}/{int(lost.sum())}"}
 
 
-def run(set_dir, tracker, keep):
+def checkout_with_track_args(track_args):
+    """A scratch folder whose ``.venv/bin/python`` is this checkout's, with ``track_args``
+    added to ``-m zoopraxis track`` (run_set.py runs ``.venv/bin/python`` of its folder)."""
+    folder = Path(tempfile.mkdtemp(prefix="zp-track-args-"))
+    script = folder / ".venv" / "bin" / "python"
+    script.parent.mkdir(parents=True)
+    python = shlex.quote(str(ROOT / ".venv" / "bin" / "python"))
+    script.write_text("#!/bin/sh\n"
+                      f'if [ "$1 $2 $3" = "-m zoopraxis track" ]; then exec {python} "$@" '
+                      f"{' '.join(map(shlex.quote, shlex.split(track_args)))}; fi\n"
+                      f'exec {python} "$@"\n')
+    script.chmod(0o755)
+    return folder
+
+
+def run(set_dir, tracker, keep, cwd=ROOT):
     keep = Path(keep) / f"{set_dir.name}_{tracker}"
     cmd = [str(ROOT / ".venv" / "bin" / "python"), str(bench_dir() / "run_set.py"),
            "--set", str(set_dir), "--keep", str(keep)]
     if tracker != "default":
         cmd += ["--tracker", tracker]
-    p = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
+    p = subprocess.run(cmd, capture_output=True, text=True, cwd=cwd)
     m = LINE.search(p.stdout)
     if not m:
         tail = (p.stdout + p.stderr).strip().splitlines()[-1:]
@@ -91,7 +109,10 @@ def main():
     ap.add_argument("--trackers", default=",".join(TRACKERS))
     ap.add_argument("--extra-sets", help="a folder of more sets (each with gt.npz)")
     ap.add_argument("--keep", help="keep each run's inputs and result.json here")
+    ap.add_argument("--track-args", default="",
+                    help="options added to every track, e.g. \"--motion-prior general\"")
     a = ap.parse_args()
+    cwd = checkout_with_track_args(a.track_args) if a.track_args else ROOT
     roots = [bench_dir() / "sets"] + ([Path(a.extra_sets)] if a.extra_sets else [])
     sets = sorted((d for r in roots if r.is_dir() for d in r.iterdir()
                    if (d / "gt.npz").exists()), key=lambda d: d.name)
@@ -109,7 +130,7 @@ def main():
     print("-" * len(head))
     for d in sets:
         for tracker in a.trackers.split(","):
-            r = run(d, tracker, keep)
+            r = run(d, tracker, keep, cwd)
             if "error" in r:
                 print(f"{d.name:16} {tracker:9} failed: {r['error']}")
                 continue

@@ -155,7 +155,7 @@ class HybridStepper(ParticleStepper):
     recentre : float
         Share of the particles drawn again around each refined pose, 0 to 1.
     prior_scale : float, optional
-        Default :data:`SEARCH_SPREAD`.
+        Default :data:`SEARCH_SPREAD` (the smooth and general priors' noise).
     layers : int, optional
         Default 0: the partitioned search does the annealing layers' work.
     settings : differential.Settings, optional
@@ -167,10 +167,12 @@ class HybridStepper(ParticleStepper):
     default_layers = 0
 
     def __init__(self, particles=2000, seed=2345, prior="smooth", recentre=RECENTRE,
-                 prior_scale=None, layers=None, silhouette=None, settings=None):
+                 prior_scale=None, layers=None, silhouette=None, settings=None,
+                 motion_model=None):
         if not 0 <= recentre <= 1:
             raise ZoopraxisError(f"recentre must be a share between 0 and 1, got {recentre}")
-        super().__init__(particles, seed, prior, prior_scale, layers, silhouette, settings)
+        super().__init__(particles, seed, prior, prior_scale, layers, silhouette, settings,
+                         motion_model)
         self.recentre = recentre
 
     def tracker_settings(self, settings):
@@ -196,7 +198,8 @@ class HybridStepper(ParticleStepper):
         new, report = diff.step(tracking.state, tracking.images, data.images, None,
                                 tracking.renders)
         diff.proposal = diff.centre = None
-        velocity = {"previous": tracking.state.pose(0)} if self.prior == "smooth" else {}
+        # The priors with velocities start the fresh particles at the refined motion.
+        velocity = {"previous": tracking.state.pose(0)} if self.prior != "walk" else {}
         pf.recentre(new.pose(0), self.recentre, **velocity)
         return new, report
 

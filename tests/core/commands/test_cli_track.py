@@ -210,3 +210,11 @@ def test_walking_prior_is_for_the_particle_trackers(take, tmp_path):
     assert run.returncode == 2
     assert "--motion-prior walk works with --tracker particle or hybrid only" in run.stderr
     assert len(run.stderr.strip().splitlines()) == 1
+
+
+def test_motion_model_is_for_the_general_prior(take, tmp_path):
+    run = zoopraxis(*track_args(take, tmp_path / "r.json", "--tracker", "particle",
+                                "--motion-model", tmp_path / "model.npz"))
+    assert run.returncode == 2
+    assert "--motion-model needs --motion-prior general" in run.stderr
+    assert len(run.stderr.strip().splitlines()) == 1

@@ -123,6 +123,15 @@ def test_hybrid_with_the_walking_prior(slow):
     assert mpjpe(res, joints).max() < 0.04
 
 
+@pytest.mark.slow
+def test_particle_and_hybrid_with_the_general_prior(slow):
+    scene, joints, body, poses = slow
+    for tracker in ("particle", "hybrid"):
+        res = run(slow, tracker, particles=200, prior="general")
+        assert res.extra["motion_prior"] == "general"
+        assert mpjpe(res, joints).max() < 0.04
+
+
 # -- the particle filter alone ------------------------------------------------------------------
 
 
