@@ -194,7 +194,11 @@ class ParticleStepper(Stepper):
         if isinstance(particles, bool) or int(particles) != particles or particles < 1:
             raise ZoopraxisError(f"the number of particles must be a positive whole number, "
                                  f"got {particles!r}")
-        self.prior_scale = self.default_prior_scale if prior_scale is None else prior_scale
+        if prior_scale is None:
+            # The general prior's noise is learned, the captures' own change from frame to
+            # frame: no tracker widens it.
+            prior_scale = 1.0 if prior == "general" else self.default_prior_scale
+        self.prior_scale = prior_scale
         if not self.prior_scale > 0:
             raise ZoopraxisError(f"prior_scale must be positive, got {prior_scale}")
         self.particles, self.seed, self.prior = int(particles), int(seed), prior

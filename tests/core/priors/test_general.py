@@ -218,7 +218,7 @@ def test_trackers_make_the_general_prior(body, stepper, tmp_path):
     s.body, s.fps = body, 30.0
     prior = s.make_prior()
     assert isinstance(prior, general.GeneralMotionPrior)
-    assert prior.scale == s.prior_scale and s.silhouette > 0
+    assert prior.scale == s.prior_scale == 1.0 and s.silhouette > 0     # learned: not widened
     assert prior.carry_moves == (stepper is ParticleStepper)
     with pytest.raises(ZoopraxisError, match="no such motion model"):
         stepper(prior="general", motion_model=tmp_path / "none.npz")
