@@ -17,7 +17,8 @@ This is how ``core/priors/data/motion_prior.npz`` is built; run it again to rebu
    evenly over the take (each frame from the one before, ``fit3d.fit_pose``); a run with a
    frame the body misses by more than ``pose.TAKE_DROP_M`` is left out;
 3. learn the damping and correlated noise of every angle and the pose space from the runs and
-   their mirror images (``general.learn_motion_model``).
+   their mirror images (``general.learn_motion_model``); how far poses may lie off the pose
+   space is chosen by leaving each performer out in turn (``general.pose_rest_floor``).
 
 Fitting every frame of every take would take an hour; a few seconds of each take give the
 dynamics of all of them (about 4 minutes on one core).
@@ -97,7 +98,7 @@ def main(argv=None):
     if not paths:
         sys.exit("learn_motion_prior: no capture left to learn from")
     length = int(round(args.seconds * REFERENCE_FPS))
-    sequences, subjects, t0 = [], set(), time.time()
+    sequences, performers, t0 = [], [], time.time()
     for k, path in enumerate(paths):
         try:
             take = cmu.read_take(path)
@@ -111,19 +112,21 @@ def main(argv=None):
             run = fit_run(body, joints[start:start + length])
             if run is not None:
                 sequences.append(run)
+                performers.append(take.subject)
                 kept += 1
-        if kept:
-            subjects.add(take.subject)
         print(f"[{k + 1}/{len(paths)}] {take.name}: {kept} runs of {length} frames "
               f"({time.time() - t0:.0f} s)", flush=True)
     if not sequences:
         sys.exit("learn_motion_prior: no run could be fitted")
-    model = general.learn_motion_model(make_body(TEMPLATE).dof_names, sequences, REFERENCE_FPS)
+    model = general.learn_motion_model(make_body(TEMPLATE).dof_names, sequences, REFERENCE_FPS,
+                                       performers=performers)
+    subjects = set(performers)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     model.save(args.out)
     print(f"{len(sequences)} runs of {len(subjects)} performers ({' '.join(sorted(subjects))}), "
           f"{model.frames} frames with mirror images: {len(model.pose_std)} pose components, "
-          f"{len(model.noise_std)} noise components, {args.out.stat().st_size / 1024:.1f} kB "
+          f"{len(model.noise_std)} noise components, rest off the pose space at least "
+          f"{model.pose_rest.min():.3f} rad, {args.out.stat().st_size / 1024:.1f} kB "
           f"-> {args.out}")
     return model
 

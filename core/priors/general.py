@@ -54,6 +54,10 @@ NOISE_VARIANCE, NOISE_COMPONENTS = 0.9, 10
 # step and away from the pose space.
 MIN_NOISE_REST, MIN_POSE_REST = 0.005, 0.05
 
+# Candidate floors of the pose space's rest (radians) when performers are left out in turn
+# (:func:`pose_rest_floor`).
+REST_FLOORS = (0.05, 0.075, 0.1, 0.15, 0.2, 0.3, 0.4)
+
 # Redraws of angles that fall outside the joint limits before they are clipped.
 _LIMIT_REDRAWS = 8
 
@@ -206,7 +210,48 @@ def _pooled(std, groups):
     return out
 
 
-def learn_motion_model(dof_names, sequences, fps=REFERENCE_FPS, *, mirror=True):
+def _pose_nll(X, mean, basis, std, rest):
+    """Mean negative log density of poses X under the probabilistic PCA."""
+    S = basis.T @ np.diag(std ** 2) @ basis + np.diag(rest ** 2)
+    d = X - mean
+    return 0.5 * (np.mean(np.einsum("nd,nd->n", d, np.linalg.solve(S, d.T).T))
+                  + np.linalg.slogdet(2 * np.pi * S)[1])
+
+
+def pose_rest_floor(angles, performers):
+    """The floor of the pose space's rest that best predicts performers not seen.
+
+    A pose space learned from a few performers is too tight for another one: his poses lie
+    further off it than the training poses do. Each performer is left out in turn, the space
+    learned from the others, and the left-out poses' mean negative log density summed over
+    the performers for each of :data:`REST_FLOORS`; the best floor is returned.
+
+    Parameters
+    ----------
+    angles : list of array, shape (F_i, D)
+    performers : list of str
+        The performer of each array.
+
+    Returns
+    -------
+    floor : float
+        :data:`MIN_POSE_REST` when there are fewer than two performers.
+    """
+    names = sorted(set(performers))
+    if len(names) < 2:
+        return MIN_POSE_REST
+    cost = np.zeros(len(REST_FLOORS))
+    for name in names:
+        seen = np.concatenate([a for a, p in zip(angles, performers) if p != name])
+        unseen = np.concatenate([a for a, p in zip(angles, performers) if p == name])
+        mean, basis, std, rest = _components(seen, POSE_VARIANCE, POSE_COMPONENTS, True, 0.0)
+        cost += [_pose_nll(unseen, mean, basis, std, np.maximum(rest, floor))
+                 for floor in REST_FLOORS]
+    return REST_FLOORS[int(np.argmin(cost))]
+
+
+def learn_motion_model(dof_names, sequences, fps=REFERENCE_FPS, *, mirror=True,
+                       performers=None):
     """Learn a :class:`MotionModel` from sequences of fitted poses.
 
     Every sequence is a run of consecutive frames at ``fps``; with ``mirror`` each is added a
@@ -215,7 +260,8 @@ def learn_motion_model(dof_names, sequences, fps=REFERENCE_FPS, *, mirror=True):
     1. Velocities are the angles' changes per frame; the damping of each angle is the least
        squares ``a`` of ``v_t = a v_{t-1}``, and the prediction errors
        ``e_t = v_t - a v_{t-1}`` are decomposed by PCA (no centring: their mean is zero).
-    2. The poses are decomposed by PCA around their mean.
+    2. The poses are decomposed by PCA around their mean; what the components leave has a
+       floor chosen by leaving performers out (:func:`pose_rest_floor`), when they are given.
     3. The root: position changes and rotation increments ``log(R_t R_{t-1}^T)`` (world
        axes), the same damping and error per axis, pooled over x and y.
 
@@ -225,14 +271,20 @@ def learn_motion_model(dof_names, sequences, fps=REFERENCE_FPS, *, mirror=True):
     sequences : list of (roots, angles)
         ``roots`` (F, 4, 4) world-from-pelvis, ``angles`` (F, D); F >= 3.
     fps : float
+    performers : list of str, optional
+        The performer of each sequence.
 
     Returns
     -------
     MotionModel
     """
     names = tuple(dof_names)
-    angles, root = [], []
-    for roots, a in sequences:
+    performers = [""] * len(sequences) if performers is None else list(performers)
+    if len(performers) != len(sequences):
+        raise ZoopraxisError(f"learn_motion_model: {len(performers)} performers for "
+                             f"{len(sequences)} sequences")
+    angles, root, whose = [], [], []
+    for (roots, a), performer in zip(sequences, performers):
         roots, a = np.asarray(roots, float), np.asarray(a, float)
         if len(a) < 3:
             continue
@@ -240,8 +292,10 @@ def learn_motion_model(dof_names, sequences, fps=REFERENCE_FPS, *, mirror=True):
             raise ZoopraxisError(f"learn_motion_model: a sequence has angles {a.shape} and "
                                  f"roots {roots.shape}, expected {len(names)} angles")
         angles.append(a)
+        whose.append(performer)
         if mirror:
             angles.append(mirror_angles(names, a))
+            whose.append(performer)
         dr = se3.log_so3(roots[1:, :3, :3] @ np.swapaxes(roots[:-1, :3, :3], 1, 2))
         root.append(np.concatenate([np.diff(roots[:, :3, 3], axis=0), dr], axis=1))
     if not angles:
@@ -252,9 +306,8 @@ def learn_motion_model(dof_names, sequences, fps=REFERENCE_FPS, *, mirror=True):
     _, noise_basis, noise_std, noise_rest = _components(E, NOISE_VARIANCE, NOISE_COMPONENTS,
                                                         False, MIN_NOISE_REST)
     X = np.concatenate(angles)
-    pose_mean, pose_basis, pose_std, pose_rest = _components(X, POSE_VARIANCE,
-                                                             POSE_COMPONENTS, True,
-                                                             MIN_POSE_REST)
+    pose_mean, pose_basis, pose_std, pose_rest = _components(
+        X, POSE_VARIANCE, POSE_COMPONENTS, True, pose_rest_floor(angles, whose))
     groups = ((0, 1), (3, 4))                  # x and y alike, the tilts rx and ry alike
     root_a = _damping(root, groups)
     root_e = np.concatenate([v[1:] - root_a * v[:-1] for v in root])

@@ -72,6 +72,24 @@ def test_learning_recovers_damping_shared_noise_and_the_pose_space(body, rng):
     assert model.root_damping[0] > 0.95 and model.root_noise[0] < 1e-3
 
 
+def test_rest_off_the_pose_space_is_chosen_on_performers_left_out(body, rng):
+    # Each performer moves along the same direction, each from his own pose: a space learned
+    # from the others misses a performer by his own offset (0.2 rad per angle).
+    D = body.n_dofs
+    along = rng.normal(size=D)
+    along /= np.linalg.norm(along)
+    angles, performers = [], []
+    for k in range(6):
+        own = rng.normal(size=D) * 0.2
+        angles.append(own + rng.normal(size=(200, 1)) * along + rng.normal(size=(200, D)) * 0.01)
+        performers.append(str(k))
+    assert general.pose_rest_floor(angles, performers) >= 0.15
+    assert general.pose_rest_floor(angles[:1], performers[:1]) == general.MIN_POSE_REST
+    # Performers alike: the floor stays low.
+    alike = [a - a.mean(axis=0) for a in angles]
+    assert general.pose_rest_floor(alike, performers) <= 0.075
+
+
 def test_learning_adds_the_mirror_images(body, rng):
     runs = synthetic_runs(body, rng, runs=4)
     lone = general.learn_motion_model(body.dof_names, runs, mirror=False)
