@@ -219,12 +219,16 @@ def _pose_nll(X, mean, basis, std, rest):
 
 
 def pose_rest_floor(angles, performers):
-    """The floor of the pose space's rest that best predicts performers not seen.
+    """The floor of the pose space's rest that serves performers not seen.
 
     A pose space learned from a few performers is too tight for another one: his poses lie
     further off it than the training poses do. Each performer is left out in turn, the space
-    learned from the others, and the left-out poses' mean negative log density summed over
-    the performers for each of :data:`REST_FLOORS`; the best floor is returned.
+    learned from the others, and the left-out poses' mean negative log density measured for
+    each of :data:`REST_FLOORS`. The floor chosen is the one whose worst regret over the
+    performers (its cost less the performer's best) is least: the captures cluster (the Daz
+    conversions put every performer on one skeleton, so they fit alike), and a sum over the
+    performers would choose what suits the cluster, where a dancer unlike the rest needs a
+    floor four times higher (CMU 49, 94, 05: 0.3 rad against the cluster's 0.05).
 
     Parameters
     ----------
@@ -240,14 +244,15 @@ def pose_rest_floor(angles, performers):
     names = sorted(set(performers))
     if len(names) < 2:
         return MIN_POSE_REST
-    cost = np.zeros(len(REST_FLOORS))
-    for name in names:
+    cost = np.zeros((len(names), len(REST_FLOORS)))
+    for i, name in enumerate(names):
         seen = np.concatenate([a for a, p in zip(angles, performers) if p != name])
         unseen = np.concatenate([a for a, p in zip(angles, performers) if p == name])
         mean, basis, std, rest = _components(seen, POSE_VARIANCE, POSE_COMPONENTS, True, 0.0)
-        cost += [_pose_nll(unseen, mean, basis, std, np.maximum(rest, floor))
-                 for floor in REST_FLOORS]
-    return REST_FLOORS[int(np.argmin(cost))]
+        cost[i] = [_pose_nll(unseen, mean, basis, std, np.maximum(rest, floor))
+                   for floor in REST_FLOORS]
+    regret = cost - cost.min(axis=1, keepdims=True)
+    return REST_FLOORS[int(np.argmin(regret.max(axis=0)))]
 
 
 def learn_motion_model(dof_names, sequences, fps=REFERENCE_FPS, *, mirror=True,

@@ -72,7 +72,7 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, settings=
 
 def track_filter(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, seed=2345,
                  frames=None, offsets=None, max_size=960, progress=None, cancel=None,
-                 log=None, init=None, settings=None, prior="smooth", recentre=None,
+                 log=None, init=None, settings=None, prior="general", recentre=None,
                  prior_scale=None, layers=None, silhouette=None, blend_reach=BLEND_REACH,
                  init_options=None, motion_model=None):
     """Track a take with the particle filter, alone or as the coarse stage of the hybrid.

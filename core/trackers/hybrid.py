@@ -168,7 +168,7 @@ class HybridStepper(ParticleStepper):
     default_prior_scale = SEARCH_SPREAD
     default_layers = 0
 
-    def __init__(self, particles=2000, seed=2345, prior="smooth", recentre=RECENTRE,
+    def __init__(self, particles=2000, seed=2345, prior="general", recentre=RECENTRE,
                  prior_scale=None, layers=None, silhouette=None, settings=None,
                  motion_model=None):
         if not 0 <= recentre <= 1:
