@@ -7,6 +7,7 @@ as a user would (clicks: the true 2D joints of frame 0 plus 2 px of noise) and s
 
     .venv/bin/python benchmarks/bench_realistic.py [--sets a,b] [--trackers default,hybrid]
         [--keep DIR] [--extra-sets DIR] [--click-seeds 7,8,9]
+        [--track-args "--motion-prior general"]
 
 Columns: MPJPE and Procrustes-aligned PA-MPJPE (mm), frames lost (the tracker said "lost" or
 MPJPE over 150 mm; for one view, PA-MPJPE over 150 mm), knee and elbow flexion RMSE (degrees),
@@ -15,7 +16,9 @@ error: frames over 150 mm called ok (must be 0), frames called lost that are und
 frames called lost with no joint over 150 mm (false alarms: nothing to fix), frames called ok
 that are under 50 mm, over all frames called ok.
 ``--extra-sets DIR`` adds every set folder under DIR (sets rendered with
-``../shared/bench/render``; they stay outside the repository).
+``../shared/bench/render``; they stay outside the repository). ``--track-args`` adds options to
+every ``zoopraxis track`` that run_set.py runs (it has no option for that): run_set.py then
+runs from a scratch folder whose ``.venv/bin/python`` is a script that adds them (POSIX only).
 
 ``--click-seeds`` runs each set and tracker once per seed of the clicks' 2 px noise (run_set.py
 draws it with seed 7) and adds a line with the mean and the range over the seeds. A tracker that
@@ -27,6 +30,7 @@ import argparse
 import json
 import os
 import re
+import shlex
 import subprocess
 import sys
 import tempfile
@@ -80,7 +84,22 @@ WITH_SEED = ("import sys; sys.path.insert(0, sys.argv.pop(1)); seed = int(sys.ar
              "sys.exit(run_set.main())")
 
 
-def run(set_dir, tracker, keep, seed=RUN_SET_SEED):
+def checkout_with_track_args(track_args):
+    """A scratch folder whose ``.venv/bin/python`` is this checkout's, with ``track_args``
+    added to ``-m zoopraxis track`` (run_set.py runs ``.venv/bin/python`` of its folder)."""
+    folder = Path(tempfile.mkdtemp(prefix="zp-track-args-"))
+    script = folder / ".venv" / "bin" / "python"
+    script.parent.mkdir(parents=True)
+    python = shlex.quote(str(ROOT / ".venv" / "bin" / "python"))
+    script.write_text("#!/bin/sh\n"
+                      f'if [ "$1 $2 $3" = "-m zoopraxis track" ]; then exec {python} "$@" '
+                      f"{' '.join(map(shlex.quote, shlex.split(track_args)))}; fi\n"
+                      f'exec {python} "$@"\n')
+    script.chmod(0o755)
+    return folder
+
+
+def run(set_dir, tracker, keep, seed=RUN_SET_SEED, cwd=ROOT):
     keep = Path(keep) / (f"{set_dir.name}_{tracker}" if seed == RUN_SET_SEED
                          else f"{set_dir.name}_{tracker}_clicks{seed}")
     python = str(ROOT / ".venv" / "bin" / "python")
@@ -89,7 +108,7 @@ def run(set_dir, tracker, keep, seed=RUN_SET_SEED):
     cmd += ["--set", str(set_dir), "--keep", str(keep)]
     if tracker != "default":
         cmd += ["--tracker", tracker]
-    p = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
+    p = subprocess.run(cmd, capture_output=True, text=True, cwd=cwd)
     m = LINE.search(p.stdout)
     if not m:
         tail = (p.stdout + p.stderr).strip().splitlines()[-1:]
@@ -122,12 +141,15 @@ def main():
     ap.add_argument("--keep", help="keep each run's inputs and result.json here")
     ap.add_argument("--click-seeds", default=str(RUN_SET_SEED),
                     help="comma-separated seeds of the clicks' noise (default: run_set.py's)")
+    ap.add_argument("--track-args", default="",
+                    help="options added to every track, e.g. \"--motion-prior general\"")
     a = ap.parse_args()
     try:
         seeds = [int(x) for x in a.click_seeds.split(",")]
     except ValueError:
         print(f"--click-seeds: expected whole numbers separated by commas, got {a.click_seeds!r}")
         return 2
+    cwd = checkout_with_track_args(a.track_args) if a.track_args else ROOT
     roots = [bench_dir() / "sets"] + ([Path(a.extra_sets)] if a.extra_sets else [])
     sets = sorted((d for r in roots if r.is_dir() for d in r.iterdir()
                    if (d / "gt.npz").exists()), key=lambda d: d.name)
@@ -147,7 +169,7 @@ def main():
         for tracker in a.trackers.split(","):
             runs = []
             for seed in seeds:
-                r = run(d, tracker, keep, seed)
+                r = run(d, tracker, keep, seed, cwd)
                 if "error" in r:
                     print(f"{d.name:16} {tracker:9} {seed:6d} failed: {r['error']}")
                     continue

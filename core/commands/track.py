@@ -33,10 +33,16 @@ def build_parser():
                    help="longest side of the working images, pixels (default 960)")
     p.add_argument("--particles", type=int, default=2000,
                    help="particles of the particle and hybrid trackers (default 2000)")
-    p.add_argument("--motion-prior", choices=("smooth", "walk"), default="smooth",
-                   help="how the particle and hybrid trackers predict the next frame: smooth "
-                        "motion of every joint (default), or the walking prior learned from "
-                        "the walks of many performers (core/priors/data/walk_prior.npz)")
+    p.add_argument("--motion-prior", choices=("smooth", "walk", "general"),
+                   help="how the particle and hybrid trackers predict the next frame: the "
+                        "general prior learned from captures of any motion, how each joint "
+                        "moves and which poses performers take "
+                        "(core/priors/data/motion_prior.npz, the default), smooth motion of "
+                        "every joint, or the walking prior learned from the walks of many "
+                        "performers (core/priors/data/walk_prior.npz)")
+    p.add_argument("--motion-model", metavar="FILE",
+                   help="the general prior's model, learned by tools/learn_motion_prior.py "
+                        "(default: the shipped one)")
     p.add_argument("--seed", type=int, default=2345)
     p.add_argument("--workers", type=int, default=0,
                    help="processes for the differential tracker's passes (a take with several "
@@ -64,6 +70,7 @@ def main(argv):
     out = check_output(args.out, args.force, inputs=[
         ("--markers", args.markers), ("--calibration", args.calibration),
         ("--dims-from", args.dims_from), ("--pose-prior", args.pose_prior),
+        ("--motion-model", args.motion_model),
         *((f"--plate {view}", path) for view, path in paths.items())])
     offsets = parse_view_values(args.offset, "--offset", int)
     unknown = [v for v in offsets if v not in paths]
@@ -88,9 +95,13 @@ def main(argv):
         print(f"track: warning: {warning}", flush=True)
     if args.workers < 0:
         raise ZoopraxisError(f"--workers {args.workers}: give 0 (one per core) or more")
-    if args.motion_prior != "smooth" and args.tracker == "differential":
+    if args.motion_prior not in (None, "smooth") and args.tracker == "differential":
         raise ZoopraxisError(f"--motion-prior {args.motion_prior} works with --tracker particle "
                              "or hybrid only")
+    if args.motion_model and (args.motion_prior not in (None, "general")
+                              or args.tracker == "differential"):
+        raise ZoopraxisError("--motion-model needs --motion-prior general (--tracker particle "
+                             "or hybrid)")
     if args.refine_body and args.tracker != "differential":
         raise ZoopraxisError("--refine-body works with --tracker differential only")
     if args.refine_body and cameras is None:
@@ -116,7 +127,9 @@ def main(argv):
 
             result = track_filter(opened, anchors, cameras, tracker=args.tracker,
                                   particles=args.particles, seed=args.seed,
-                                  prior=args.motion_prior, **kwargs)
+                                  prior=args.motion_prior or "general",
+                                  motion_model=args.motion_model,
+                                  **kwargs)
     _write_or_rescue(out, result, args.force)
     elapsed = time.perf_counter() - t0
     counts = {s: result.status.count(s) for s in ("ok", "uncertain", "lost")}

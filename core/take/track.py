@@ -72,9 +72,9 @@ def track(plates, anchors, cameras=None, *, frames=None, offsets=None, settings=
 
 def track_filter(plates, anchors, cameras=None, *, tracker="hybrid", particles=2000, seed=2345,
                  frames=None, offsets=None, max_size=960, progress=None, cancel=None,
-                 log=None, init=None, settings=None, prior="smooth", recentre=None,
+                 log=None, init=None, settings=None, prior="general", recentre=None,
                  prior_scale=None, layers=None, silhouette=None, blend_reach=BLEND_REACH,
-                 init_options=None):
+                 init_options=None, motion_model=None):
     """Track a take with the particle filter, alone or as the coarse stage of the hybrid.
 
     Parameters
@@ -85,7 +85,7 @@ def track_filter(plates, anchors, cameras=None, *, tracker="hybrid", particles=2
     cameras : dict of str to PinholeCamera
         One per view. Required: for uncalibrated plates use :func:`track`.
     tracker : {"particle", "hybrid"}
-    particles, seed, prior, prior_scale, layers, silhouette, settings
+    particles, seed, prior, prior_scale, layers, silhouette, settings, motion_model
         The filter's (:class:`trackers.filter_stepper.ParticleStepper`); the same inputs and
         seed give the same track.
     recentre : float, optional
@@ -111,7 +111,8 @@ def track_filter(plates, anchors, cameras=None, *, tracker="hybrid", particles=2
         raise ZoopraxisError(f"unknown tracker '{tracker}' (expected one of "
                              f"{', '.join(FILTER_TRACKERS)})")
     options = dict(particles=particles, seed=seed, prior=prior, prior_scale=prior_scale,
-                   layers=layers, silhouette=silhouette, settings=settings)
+                   layers=layers, silhouette=silhouette, settings=settings,
+                   motion_model=motion_model)
     if tracker == "hybrid" and recentre is not None:
         options["recentre"] = recentre
     stepper = FILTER_TRACKERS[tracker](**options)

@@ -1,10 +1,11 @@
 """The particle filter as a take's stepper: Sidenbladh, Black & Fleet's tracker over a take.
 
 Each pass has its own filter (:class:`particle.ParticleFilter`), started at the anchor's pose
-and stepped one frame at a time under a temporal prior (smooth motion §6.1, or the learned
-walking cycle §6.2); its expected pose is the answer and its posterior's spread the pose's
-uncertainty. The differential tracker's images and renders measure the step's grey residual, so
-that both trackers report in one unit. Where the background model gives a foreground mask, the
+and stepped one frame at a time under a temporal prior (smooth motion §6.1, the learned
+walking cycle §6.2, or the general motion prior learned from capture, :mod:`general`); its
+expected pose is the answer and its posterior's spread the pose's uncertainty. The
+differential tracker's images and renders measure the step's grey residual, so that both
+trackers report in one unit. Where the background model gives a foreground mask, the
 filter's likelihood adds a silhouette cue (:data:`SILHOUETTE`, see :mod:`likelihood`), and each
 frame's status also says how the pose sits in the foreground (:func:`coverage_status`).
 
@@ -24,6 +25,7 @@ from ..errors import ZoopraxisError
 from ..imaging.background import model_coverage, silhouette_iou
 from ..imaging.plates import to_gray_float
 from ..priors.motion_prior import SmoothMotionPrior, smooth_sigmas
+from ..priors.general import GeneralMotionPrior, MotionModel
 from ..priors.walking import WalkingPrior
 from .differential import DifferentialTracker, Settings, State, StepReport
 from .frames import prepare_images
@@ -31,7 +33,7 @@ from .image_motion import accumulate
 from .particle import ParticleFilter
 from .stepper import Stepper
 
-PRIORS = ("smooth", "walk")
+PRIORS = ("smooth", "walk", "general")
 
 # Likelihood options of the trackers' filter: the silhouette cue (see :mod:`likelihood`) is on
 # wherever the background model gives a foreground mask; the appearance alone drifts.
@@ -156,22 +158,29 @@ class ParticleStepper(Stepper):
         Particles of the filter.
     seed : int
         Seeds every random draw.
-    prior : {"smooth", "walk"}
-        The filter's temporal prior: smooth motion (§6.1, any motion) or the learned walking
-        cycle (§6.2).
+    prior : {"general", "smooth", "walk"}
+        The filter's temporal prior: the general motion prior's learned dynamics and pose
+        space (any motion, :class:`general.GeneralMotionPrior`; the default), smooth motion
+        (§6.1, any motion) or the learned walking cycle (§6.2). On the rendered benchmark
+        sets, of performers it has not seen, the general prior is 26-85 mm closer after
+        alignment than smooth motion with the filter alone and 0-18 mm with the hybrid
+        (``benchmarks/README.md``).
     prior_scale : float, optional
-        Scale of the smooth-motion prior's position noise (default 1; the walking prior keeps
-        its own).
+        Scale of the smooth-motion or general prior's noise (default 1; the walking prior
+        keeps its own).
     layers : int, optional
         Annealing passes of the filter (:class:`particle.ParticleFilter`); default 2.
     silhouette : float, optional
         Weight of the likelihood's silhouette cue where a view has a background model (0:
-        appearance only, as in the paper). Default :data:`SILHOUETTE` with the smooth prior,
-        0 with the walking prior (there it made the hybrid's slow-walk test worse, 25 -> 40-54
-        mm; on the jumps, smooth prior, it removes the frames over 100 mm: 30 -> 0).
+        appearance only, as in the paper). Default :data:`SILHOUETTE` with the smooth and
+        general priors, 0 with the walking prior (there it made the hybrid's slow-walk test
+        worse, 25 -> 40-54 mm; on the jumps, smooth prior, it removes the frames over 100 mm:
+        30 -> 0).
     settings : differential.Settings, optional
         The image preparation's settings (one pyramid level: the images only measure the
         residual).
+    motion_model : MotionModel or path, optional
+        The general prior's learned model (default the shipped one).
     """
 
     name = "particle"
@@ -181,21 +190,28 @@ class ParticleStepper(Stepper):
     default_prior_scale = 1.0
     default_layers = 2
 
-    def __init__(self, particles=2000, seed=2345, prior="smooth", prior_scale=None,
-                 layers=None, silhouette=None, settings=None):
+    def __init__(self, particles=2000, seed=2345, prior="general", prior_scale=None,
+                 layers=None, silhouette=None, settings=None, motion_model=None):
         if prior not in PRIORS:
             raise ZoopraxisError(f"unknown motion prior '{prior}' (expected one of "
                                  f"{', '.join(PRIORS)})")
         if isinstance(particles, bool) or int(particles) != particles or particles < 1:
             raise ZoopraxisError(f"the number of particles must be a positive whole number, "
                                  f"got {particles!r}")
-        self.prior_scale = self.default_prior_scale if prior_scale is None else prior_scale
+        if prior_scale is None:
+            # The general prior's noise is learned, the captures' own change from frame to
+            # frame: no tracker widens it.
+            prior_scale = 1.0 if prior == "general" else self.default_prior_scale
+        self.prior_scale = prior_scale
         if not self.prior_scale > 0:
             raise ZoopraxisError(f"prior_scale must be positive, got {prior_scale}")
         self.particles, self.seed, self.prior = int(particles), int(seed), prior
         self.layers = self.default_layers if layers is None else layers
-        self.silhouette = (SILHOUETTE if prior == "smooth" else 0.0) if silhouette is None \
+        self.silhouette = (0.0 if prior == "walk" else SILHOUETTE) if silhouette is None \
             else silhouette
+        # Read once here: every pass makes its own prior from it.
+        self.motion_model = None if prior != "general" else motion_model \
+            if isinstance(motion_model, MotionModel) else MotionModel.load(motion_model)
         settings = settings or Settings()
         if "limb_search" in {f.name for f in dataclasses.fields(settings)}:
             # The partitioned search is the hybrid's own limb search; the differential
@@ -220,6 +236,10 @@ class ParticleStepper(Stepper):
     def make_prior(self):
         if self.prior == "walk":
             return WalkingPrior(self.body, fps=self.fps)
+        if self.prior == "general":
+            return GeneralMotionPrior(self.body, self.motion_model, fps=self.fps,
+                                      scale=self.prior_scale,
+                                      carry_moves=self.name == "particle")
         sigma_position, _ = smooth_sigmas(self.body, self.fps)
         # The filter alone must follow accelerations through its layers' moves.
         return SmoothMotionPrior(self.body, fps=self.fps,

@@ -43,7 +43,9 @@ RECENTRE = 0.5
 
 # The hybrid's filter draws the smooth-motion prior's position noise this many times wider than
 # the filter alone: the refinement brings the precision, the search must reach the limb that
-# moved furthest (on fast walking, 2 to 4 times track alike, 1 worse).
+# moved furthest (on fast walking, 2 to 4 times track alike, 1 worse). The general prior's
+# learned noise is already as wide as the captures' motion and is not widened (synthetic
+# walks, 300 particles, two seeds: 13 and 27 mm at 1 and 1.5, 19-26 and 32-41 at 3).
 SEARCH_SPREAD = 3.0
 
 
@@ -155,7 +157,7 @@ class HybridStepper(ParticleStepper):
     recentre : float
         Share of the particles drawn again around each refined pose, 0 to 1.
     prior_scale : float, optional
-        Default :data:`SEARCH_SPREAD`.
+        Default :data:`SEARCH_SPREAD` with the smooth prior, 1 with the general prior.
     layers : int, optional
         Default 0: the partitioned search does the annealing layers' work.
     settings : differential.Settings, optional
@@ -166,11 +168,13 @@ class HybridStepper(ParticleStepper):
     default_prior_scale = SEARCH_SPREAD
     default_layers = 0
 
-    def __init__(self, particles=2000, seed=2345, prior="smooth", recentre=RECENTRE,
-                 prior_scale=None, layers=None, silhouette=None, settings=None):
+    def __init__(self, particles=2000, seed=2345, prior="general", recentre=RECENTRE,
+                 prior_scale=None, layers=None, silhouette=None, settings=None,
+                 motion_model=None):
         if not 0 <= recentre <= 1:
             raise ZoopraxisError(f"recentre must be a share between 0 and 1, got {recentre}")
-        super().__init__(particles, seed, prior, prior_scale, layers, silhouette, settings)
+        super().__init__(particles, seed, prior, prior_scale, layers, silhouette, settings,
+                         motion_model)
         self.recentre = recentre
 
     def tracker_settings(self, settings):
@@ -196,7 +200,8 @@ class HybridStepper(ParticleStepper):
         new, report = diff.step(tracking.state, tracking.images, data.images, None,
                                 tracking.renders)
         diff.proposal = diff.centre = None
-        velocity = {"previous": tracking.state.pose(0)} if self.prior == "smooth" else {}
+        # The priors with velocities start the fresh particles at the refined motion.
+        velocity = {"previous": tracking.state.pose(0)} if self.prior != "walk" else {}
         pf.recentre(new.pose(0), self.recentre, **velocity)
         return new, report
 

@@ -51,6 +51,9 @@ def test_zip_holds_extension_and_no_development_files(built_zip):
     names = zipfile.ZipFile(built_zip).namelist()
     assert {"blender_manifest.toml", "__init__.py", "cli.py", "__main__.py",
             "addon/registration.py", "addon/preferences.py", "core/errors.py"} <= set(names)
+    # the learned priors the trackers and the initialization use by default
+    assert {f"core/priors/data/{name}.npz" for name in (
+        "motion_prior", "pose_prior", "walk_prior", "proportions_prior")} <= set(names)
     assert any(name.startswith("core/") for name in names)
     leaked = [name for name in names if name.split("/")[0] in (
         "tests", "benchmarks", "tools", ".venv", ".ci", ".git", "wheels", "out")

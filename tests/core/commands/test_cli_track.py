@@ -210,3 +210,20 @@ def test_walking_prior_is_for_the_particle_trackers(take, tmp_path):
     assert run.returncode == 2
     assert "--motion-prior walk works with --tracker particle or hybrid only" in run.stderr
     assert len(run.stderr.strip().splitlines()) == 1
+
+
+def test_motion_model_is_for_the_general_prior(take, tmp_path):
+    run = zoopraxis(*track_args(take, tmp_path / "r.json", "--tracker", "particle",
+                                "--motion-prior", "smooth", "--motion-model",
+                                tmp_path / "model.npz"))
+    assert run.returncode == 2
+    assert "--motion-model needs --motion-prior general" in run.stderr
+    assert len(run.stderr.strip().splitlines()) == 1
+
+
+def test_particle_tracker_uses_the_general_prior_by_default(take, tmp_path):
+    out = tmp_path / "r.json"
+    run = zoopraxis(*track_args(take, out, "--tracker", "particle", "--particles", "50",
+                                "--frames", "0:3"))
+    assert run.returncode == 0, run.stderr
+    assert json.loads(out.read_text())["motion_prior"] == "general"

@@ -123,6 +123,17 @@ def test_hybrid_with_the_walking_prior(slow):
     assert mpjpe(res, joints).max() < 0.04
 
 
+@pytest.mark.slow
+def test_particle_and_hybrid_with_the_general_prior(slow):
+    # The default prior, named. The filter alone's bound is the one that catches a filter gone
+    # astray (test_particle_mode_writes_spread_and_status); the hybrid's is the walking prior's.
+    scene, joints, body, poses = slow
+    for tracker, bound in (("particle", 0.1), ("hybrid", 0.04)):
+        res = run(slow, tracker, particles=200, prior="general")
+        assert res.extra["motion_prior"] == "general"
+        assert mpjpe(res, joints).max() < bound
+
+
 # -- the particle filter alone ------------------------------------------------------------------
 
 
