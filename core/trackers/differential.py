@@ -57,6 +57,9 @@ class Settings:
                                       # (negative: two-sided, the contour on the boundary)
     em: bool = True                   # EM refinement of the support maps
     velocity: float = 0.5             # fraction of the last motion used to predict the next
+    learned_root: bool = True         # calibrated: the pelvis's translation predicted with the
+                                      # carry learned from capture (priors/general.py), not
+                                      # ``velocity`` (DifferentialStepper sets it)
     prior_weight: float = 0.01        # pull towards the prediction, relative to the data
     damping: float = 1e-3             # initial Levenberg-Marquardt damping
     collision_weight: float = 3e4     # limb overlap penalty, per square metre
@@ -223,13 +226,29 @@ class DifferentialTracker:
         new.angles = self.body.clamp(state.angles + delta[angle_cols])
         return new
 
+    # Per world axis, the share of the pelvis's last motion carried into the next frame's
+    # prediction (``tx ty tz rx ry rz``), or None: the root moves as the angles do,
+    # ``settings.velocity`` of its last screw motion. Calibrated views only (see
+    # :meth:`predict`); the take's stepper sets it from the motion learned from capture.
+    root_carry = None
+
     def predict(self, state, previous=None):
-        """Constant-velocity prediction, damped by ``settings.velocity``."""
+        """Constant-velocity prediction, damped by ``settings.velocity``, and the pelvis's by
+        :attr:`root_carry` where that is set (calibrated views: it moves in world axes)."""
         if previous is None or self.settings.velocity == 0:
             return state.copy()
         k = self.settings.velocity
         new = state.copy()
         new.angles = self.body.clamp(state.angles + k * (state.angles - previous.angles))
+        if self.root_carry is not None and self.calibrated:
+            carry = np.asarray(self.root_carry, float)
+            root, before = state.roots[0], previous.roots[0]
+            moved = root.copy()
+            moved[:3, 3] += carry[:3] * (root[:3, 3] - before[:3, 3])
+            turn = se3.log_so3(root[:3, :3] @ before[:3, :3].T)     # world axes
+            moved[:3, :3] = se3.exp_so3(carry[3:] * turn) @ root[:3, :3]
+            new.roots[:] = moved
+            return new
         for c in range(len(state.roots)):
             motion = se3.log_se3(state.roots[c] @ se3.invert(previous.roots[c]))
             new.roots[c] = se3.exp_se3(k * motion) @ state.roots[c]

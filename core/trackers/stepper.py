@@ -16,7 +16,10 @@ to prepare a frame's images, how to start a pass at an anchor's pose and how to 
 """
 
 
+import numpy as np
+
 from ..imaging.plates import to_gray_float
+from ..priors.general import MotionModel
 from .differential import DifferentialTracker, Settings
 from .frames import prepare_images
 
@@ -110,6 +113,8 @@ class DifferentialStepper(Stepper):
 
     def prepare(self, body, calibrated, fps):
         self.tracker = DifferentialTracker(body, calibrated, self.settings)
+        if calibrated and self.settings.learned_root:
+            self.tracker.root_carry = learned_root_carry(fps, self.settings.velocity)
         return self.tracker
 
     def rounds(self, use_bg):
@@ -137,6 +142,22 @@ class DifferentialStepper(Stepper):
         return _DifferentialPass(self.tracker, state, data)
 
 
+def learned_root_carry(fps, turn):
+    """The pelvis's carry per world axis (``tx ty tz rx ry rz``, see
+    :attr:`differential.DifferentialTracker.root_carry`): its translation keeps the share of
+    its velocity that captured pelvises keep from frame to frame (:class:`general.MotionModel`
+    ``root_damping``, 0.93-0.99 at 30 fps: a body's momentum), its turn ``turn``.
+
+    A damped constant velocity of one half for everything lagged a walker's pelvis by half a
+    frame's stride, and the legs then fitted to the wrong place. Carrying the turn as learned
+    too (0.56-0.86) made the dance's pirouette worse (``benchmarks/README.md``).
+    """
+    model = MotionModel.load()
+    carry = np.full(6, float(turn))
+    carry[:3] = model.root_damping[:3] ** (model.fps / fps)
+    return carry
+
+
 class _DifferentialPass:
     """One pass of the differential tracker: the last two poses, images and renders."""
 
@@ -159,4 +180,4 @@ class _DifferentialPass:
         return new, report
 
 
-__all__ = ["Stepper", "DifferentialStepper"]
+__all__ = ["Stepper", "DifferentialStepper", "learned_root_carry"]
