@@ -40,7 +40,7 @@ import numpy as np
 
 from ..errors import ZoopraxisError
 from ..geometry import se3
-from .motion_prior import REFERENCE_FPS
+from .motion_prior import REFERENCE_FPS, inside_limits, read_model, state_poses
 from .pose import mirror_angles
 
 DEFAULT_MOTION_PRIOR = Path(__file__).resolve().parent / "data" / "motion_prior.npz"
@@ -57,9 +57,6 @@ MIN_NOISE_REST, MIN_POSE_REST = 0.005, 0.05
 # Candidate floors of the pose space's rest (radians) when performers are left out in turn
 # (:func:`pose_rest_floor`).
 REST_FLOORS = (0.05, 0.075, 0.1, 0.15, 0.2, 0.3, 0.4)
-
-# Redraws of angles that fall outside the joint limits before they are clipped.
-_LIMIT_REDRAWS = 8
 
 
 @dataclass(frozen=True)
@@ -152,17 +149,8 @@ class MotionModel:
     def load(cls, path=None):
         """Read a model written by :meth:`save`; default the shipped ``data/motion_prior.npz``."""
         path = Path(DEFAULT_MOTION_PRIOR if path is None else path)
-        try:
-            with np.load(path) as data:
-                fields = {k: data[k] for k in data.files}
-        except FileNotFoundError:
-            raise ZoopraxisError(f"{path}: no such motion model (rebuild it with "
-                                 "tools/learn_motion_prior.py)") from None
-        except (OSError, ValueError) as exc:
-            raise ZoopraxisError(f"{path}: not a motion model npz ({exc})") from None
-        missing = [k for k in ("dof_names", "fps", "frames") + cls._ARRAYS if k not in fields]
-        if missing:
-            raise ZoopraxisError(f"{path}: motion model lacks '{missing[0]}'")
+        fields = read_model(path, "motion model", "tools/learn_motion_prior.py",
+                            ("dof_names", "fps", "frames") + cls._ARRAYS)
         names = tuple(str(s) for s in fields["dof_names"])
         arrays = {k: fields[k].astype(float) for k in cls._ARRAYS}
         D = len(names)
@@ -499,24 +487,11 @@ class GeneralMotionPrior:
         return out
 
     def _inside_limits(self, angles, mean, sigma, rng):
-        """Redraw the components outside the limits (a truncated Gaussian), then clip."""
-        lo, hi = self.body.lower, self.body.upper
-        for _ in range(_LIMIT_REDRAWS):
-            bad = (angles < lo) | (angles > hi)
-            if not bad.any():
-                break
-            rows, cols = np.nonzero(bad)
-            angles[rows, cols] = mean[rows, cols] + rng.normal(size=rows.size) * sigma[cols]
-        return np.clip(angles, lo, hi)
+        return inside_limits(self.body, angles, mean, sigma, rng)
 
     def poses(self, state):
         """Root transforms (n, 4, 4) and angles (n, n_dofs) of the particles."""
-        n = state["t"].shape[0]
-        roots = np.zeros((n, 4, 4))
-        roots[:, :3, :3] = state["R"]
-        roots[:, :3, 3] = state["t"]
-        roots[:, 3, 3] = 1.0
-        return roots, state["angles"]
+        return state_poses(state)
 
 
 __all__ = ["GeneralMotionPrior", "MotionModel", "learn_motion_model", "DEFAULT_MOTION_PRIOR"]

@@ -245,25 +245,77 @@ class SmoothMotionPrior:
         return out
 
     def _inside_limits(self, angles, mean, sigma, rng):
-        """Redraw the components outside the limits (a truncated Gaussian), then clip."""
-        lo, hi = self.body.lower, self.body.upper
-        for _ in range(_LIMIT_REDRAWS):
-            bad = (angles < lo) | (angles > hi)
-            if not bad.any():
-                break
-            rows, cols = np.nonzero(bad)
-            angles[rows, cols] = mean[rows, cols] + rng.normal(size=rows.size) * sigma[cols]
-        return np.clip(angles, lo, hi)
+        return inside_limits(self.body, angles, mean, sigma, rng)
 
     def poses(self, state):
         """Root transforms (n, 4, 4) and angles (n, n_dofs) of the particles."""
-        n = state["t"].shape[0]
-        roots = np.zeros((n, 4, 4))
-        roots[:, :3, :3] = state["R"]
-        roots[:, :3, 3] = state["t"]
-        roots[:, 3, 3] = 1.0
-        return roots, state["angles"]
+        return state_poses(state)
 
 
-__all__ = ["SmoothMotionPrior", "param_names", "param_index", "smooth_sigmas", "fit_pose",
-           "fit_body", "root_from_joints", "ROOT_PARAMS"]
+def read_model(path, what, tool, needed):
+    """The arrays of a learned model's npz file, by name.
+
+    Parameters
+    ----------
+    path : path
+    what : str
+        What the file holds, for the errors ("walking model").
+    tool : str
+        The script that learns it, for the error of a missing file.
+    needed : sequence of str
+        Arrays the file must hold.
+
+    Raises
+    ------
+    ZoopraxisError
+        One line naming the file: missing, not an npz, or without one of ``needed``.
+    """
+    try:
+        with np.load(path) as data:
+            fields = {k: data[k] for k in data.files}
+    except FileNotFoundError:
+        raise ZoopraxisError(f"{path}: no such {what} (rebuild it with {tool})") from None
+    except (OSError, ValueError) as exc:
+        raise ZoopraxisError(f"{path}: not a {what} npz ({exc})") from None
+    missing = [k for k in needed if k not in fields]
+    if missing:
+        raise ZoopraxisError(f"{path}: {what} lacks '{missing[0]}'")
+    return fields
+
+
+def inside_limits(body, angles, mean, sigma, rng):
+    """Redraw the angles outside the body's limits from their Gaussian (a truncated Gaussian),
+    :data:`_LIMIT_REDRAWS` times at most, then clip.
+
+    Parameters
+    ----------
+    body : BodyModel
+    angles, mean : array, shape (n, n_dofs)
+        The draws (changed in place) and the means they were drawn around.
+    sigma : array, shape (n_dofs,)
+    rng : numpy.random.Generator
+    """
+    lo, hi = body.lower, body.upper
+    for _ in range(_LIMIT_REDRAWS):
+        bad = (angles < lo) | (angles > hi)
+        if not bad.any():
+            break
+        rows, cols = np.nonzero(bad)
+        angles[rows, cols] = mean[rows, cols] + rng.normal(size=rows.size) * sigma[cols]
+    return np.clip(angles, lo, hi)
+
+
+def state_poses(state):
+    """Root transforms (n, 4, 4) and angles (n, n_dofs) of a state holding ``t``, ``R`` and
+    ``angles`` (the smooth and the general prior's)."""
+    n = state["t"].shape[0]
+    roots = np.zeros((n, 4, 4))
+    roots[:, :3, :3] = state["R"]
+    roots[:, :3, 3] = state["t"]
+    roots[:, 3, 3] = 1.0
+    return roots, state["angles"]
+
+
+__all__ = ["SmoothMotionPrior", "inside_limits", "state_poses", "read_model", "param_names",
+           "param_index", "smooth_sigmas", "fit_pose", "fit_body", "root_from_joints",
+           "ROOT_PARAMS"]

@@ -22,7 +22,7 @@ from ..geometry import se3
 from ..body.body import mirror_dof_index
 from ..errors import ZoopraxisError
 from ..body.joints import JOINT_INDEX
-from .motion_prior import REFERENCE_FPS
+from .motion_prior import REFERENCE_FPS, read_model
 
 DEFAULT_WALK_PRIOR = Path(__file__).resolve().parent / "data" / "walk_prior.npz"
 
@@ -156,19 +156,9 @@ class WalkModel:
     def load(cls, path=None):
         """Read a model written by :meth:`save`; default the shipped ``data/walk_prior.npz``."""
         path = Path(DEFAULT_WALK_PRIOR if path is None else path)
-        try:
-            with np.load(path) as data:
-                fields = {k: data[k] for k in data.files}
-        except FileNotFoundError:
-            raise ZoopraxisError(f"{path}: no such walking model (rebuild it with "
-                                 "tools/learn_walk_prior.py)") from None
-        except (OSError, ValueError) as exc:
-            raise ZoopraxisError(f"{path}: not a walking model npz ({exc})") from None
-        needed = ("dof_names", "mean", "basis", "coef_std", "cycle_seconds", "leg_length",
-                  "coefficients")
-        missing = [k for k in needed if k not in fields]
-        if missing:
-            raise ZoopraxisError(f"{path}: walking model lacks '{missing[0]}'")
+        fields = read_model(path, "walking model", "tools/learn_walk_prior.py",
+                            ("dof_names", "mean", "basis", "coef_std", "cycle_seconds",
+                             "leg_length", "coefficients"))
         dof_names = tuple(str(s) for s in fields["dof_names"])
         mean, basis = fields["mean"].astype(float), fields["basis"].astype(float)
         C = len(dof_names) + len(ROOT_CURVES)
