@@ -57,9 +57,10 @@ class Settings:
                                       # (negative: two-sided, the contour on the boundary)
     em: bool = True                   # EM refinement of the support maps
     velocity: float = 0.5             # fraction of the last motion used to predict the next
-    learned_root: bool = True         # calibrated: the pelvis's translation predicted with the
-                                      # carry learned from capture (priors/general.py), not
-                                      # ``velocity`` (DifferentialStepper sets it)
+    learned_carry: bool = True        # calibrated: the pelvis's translation and the legs'
+                                      # angles predicted with the carry learned from capture
+                                      # (priors/general.py), not ``velocity``
+                                      # (DifferentialStepper sets it)
     prior_weight: float = 0.01        # pull towards the prediction, relative to the data
     damping: float = 1e-3             # initial Levenberg-Marquardt damping
     collision_weight: float = 3e4     # limb overlap penalty, per square metre
@@ -231,15 +232,20 @@ class DifferentialTracker:
     # ``settings.velocity`` of its last screw motion. Calibrated views only (see
     # :meth:`predict`); the take's stepper sets it from the motion learned from capture.
     root_carry = None
+    # Per joint angle, the share of its last change carried into the prediction, or None:
+    # ``settings.velocity`` for every angle.
+    angle_carry = None
 
     def predict(self, state, previous=None):
-        """Constant-velocity prediction, damped by ``settings.velocity``, and the pelvis's by
-        :attr:`root_carry` where that is set (calibrated views: it moves in world axes)."""
+        """Constant-velocity prediction, damped by ``settings.velocity`` (per angle by
+        :attr:`angle_carry` where that is set), and the pelvis's by :attr:`root_carry` where
+        that is set (calibrated views: it moves in world axes)."""
         if previous is None or self.settings.velocity == 0:
             return state.copy()
         k = self.settings.velocity
+        carry = k if self.angle_carry is None else np.asarray(self.angle_carry, float)
         new = state.copy()
-        new.angles = self.body.clamp(state.angles + k * (state.angles - previous.angles))
+        new.angles = self.body.clamp(state.angles + carry * (state.angles - previous.angles))
         if self.root_carry is not None and self.calibrated:
             carry = np.asarray(self.root_carry, float)
             root, before = state.roots[0], previous.roots[0]

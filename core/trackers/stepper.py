@@ -113,8 +113,9 @@ class DifferentialStepper(Stepper):
 
     def prepare(self, body, calibrated, fps):
         self.tracker = DifferentialTracker(body, calibrated, self.settings)
-        if calibrated and self.settings.learned_root:
-            self.tracker.root_carry = learned_root_carry(fps, self.settings.velocity)
+        if calibrated and self.settings.learned_carry:
+            self.tracker.angle_carry, self.tracker.root_carry = learned_carry(
+                body, fps, self.settings.velocity)
         return self.tracker
 
     def rounds(self, use_bg):
@@ -142,20 +143,34 @@ class DifferentialStepper(Stepper):
         return _DifferentialPass(self.tracker, state, data)
 
 
-def learned_root_carry(fps, turn):
-    """The pelvis's carry per world axis (``tx ty tz rx ry rz``, see
-    :attr:`differential.DifferentialTracker.root_carry`): its translation keeps the share of
-    its velocity that captured pelvises keep from frame to frame (:class:`general.MotionModel`
-    ``root_damping``, 0.93-0.99 at 30 fps: a body's momentum), its turn ``turn``.
+def learned_carry(body, fps, velocity):
+    """How much of their last change the legs' angles and the pelvis keep in the differential
+    tracker's prediction (see :meth:`differential.DifferentialTracker.predict`).
 
-    A damped constant velocity of one half for everything lagged a walker's pelvis by half a
-    frame's stride, and the legs then fitted to the wrong place. Carrying the turn as learned
-    too (0.56-0.86) made the dance's pirouette worse (``benchmarks/README.md``).
+    The legs' angles (hips, knees, ankles) and the pelvis's translation keep the share of
+    their velocity that captured performers' keep from one frame to the next
+    (:class:`general.MotionModel` ``damping`` and ``root_damping``: 0.6-0.87 for the legs,
+    0.93-0.99 for the pelvis at 30 fps; a heavy body's momentum); every other angle and the
+    pelvis's turn keep ``velocity``. With one half for everything, a walker's pelvis and
+    swinging legs lagged by half a frame's stride and were fitted from the wrong place; with
+    the learned carry of the arms, trunk and turn too, the dance and swordplay got worse
+    (``benchmarks/README.md``).
+
+    Returns
+    -------
+    angle_carry : array, shape (n_dofs,)
+    root_carry : array, shape (6,)
+        Per world axis, ``tx ty tz rx ry rz``.
     """
     model = MotionModel.load()
-    carry = np.full(6, float(turn))
-    carry[:3] = model.root_damping[:3] ** (model.fps / fps)
-    return carry
+    power = model.fps / fps
+    learned = dict(zip(model.dof_names, model.damping ** power))
+    angle_carry = np.array([learned.get(name, velocity)
+                            if name[2:].startswith(("hip", "knee", "ankle")) else velocity
+                            for name in body.dof_names], float)
+    root_carry = np.full(6, float(velocity))
+    root_carry[:3] = model.root_damping[:3] ** power
+    return angle_carry, root_carry
 
 
 class _DifferentialPass:
@@ -180,4 +195,4 @@ class _DifferentialPass:
         return new, report
 
 
-__all__ = ["Stepper", "DifferentialStepper", "learned_root_carry"]
+__all__ = ["Stepper", "DifferentialStepper", "learned_carry"]

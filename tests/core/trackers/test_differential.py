@@ -386,38 +386,53 @@ def test_em_reweighted_system_equals_a_fresh_one(body):
     assert not np.allclose(H0, H)
 
 
-def test_learned_root_carry_predicts_the_pelvis_in_world_axes(body):
+def test_learned_carry_predicts_the_pelvis_and_the_legs(body):
     from zoopraxis.core.priors.general import MotionModel
-    from zoopraxis.core.trackers.stepper import DifferentialStepper, learned_root_carry
+    from zoopraxis.core.trackers.stepper import DifferentialStepper, learned_carry
 
     model = MotionModel.load()
-    carry = learned_root_carry(30.0, 0.5)
+    angle_carry, carry = learned_carry(body, 30.0, 0.5)
     assert np.allclose(carry[:3], model.root_damping[:3]) and np.all(carry[:3] > 0.9)
     assert np.allclose(carry[3:], 0.5)
+    knee, elbow = body.dof_index("l_knee_flex"), body.dof_index("l_elbow_flex")
+    learned_knee = model.damping[list(model.dof_names).index("l_knee_flex")]
+    assert angle_carry[knee] == pytest.approx(learned_knee) and learned_knee > 0.6
+    assert angle_carry[elbow] == 0.5
     # at twice the frame rate a frame's share is the square root of the learned one
-    assert np.allclose(learned_root_carry(60.0, 0.5)[:3], np.sqrt(model.root_damping[:3]))
+    angle60, carry60 = learned_carry(body, 60.0, 0.5)
+    assert np.allclose(carry60[:3], np.sqrt(model.root_damping[:3]))
+    assert angle60[knee] == pytest.approx(np.sqrt(learned_knee))
 
     cams = ring_of_cameras(2, 3.5, 1.3, [0, 0, 0.9], SIZE, 350)
-    stepper = DifferentialStepper(D.Settings(velocity=0.5))
-    tracker = stepper.prepare(body, True, 30.0)
+    tracker = DifferentialStepper(D.Settings(velocity=0.5)).prepare(body, True, 30.0)
     assert np.allclose(tracker.root_carry, carry)
-    assert DifferentialStepper().prepare(body, False, 30.0).root_carry is None
-    assert DifferentialStepper(D.Settings(learned_root=False)).prepare(
-        body, True, 30.0).root_carry is None
+    assert np.allclose(tracker.angle_carry, angle_carry)
+    plain = DifferentialStepper().prepare(body, False, 30.0)
+    assert plain.root_carry is None and plain.angle_carry is None
+    off = DifferentialStepper(D.Settings(learned_carry=False)).prepare(body, True, 30.0)
+    assert off.root_carry is None and off.angle_carry is None
 
-    # a pelvis walking 4 cm a frame along x and turning 0.1 rad a frame about z
+    # a pelvis walking 4 cm a frame along x and turning 0.1 rad a frame about z, a knee
+    # bending and an elbow bending 0.1 rad a frame
     p0, _ = two_poses(body)
     root0 = p0.root.copy()
     root1 = root0.copy()
     root1[:3, 3] += [0.04, 0.0, 0.0]
     root1[:3, :3] = se3.exp_so3(np.array([0.0, 0.0, 0.1])) @ root0[:3, :3]
-    s0 = D.State(np.stack([root0] * 2), p0.angles, cams)
-    s1 = D.State(np.stack([root1] * 2), p0.angles, cams)
+    a0 = p0.angles.copy()
+    a0[[knee, elbow]] = 0.6
+    a1 = a0.copy()
+    a1[[knee, elbow]] += 0.1
+    s0 = D.State(np.stack([root0] * 2), a0, cams)
+    s1 = D.State(np.stack([root1] * 2), a1, cams)
     pred = tracker.predict(s1, s0)
     assert np.allclose(pred.roots[0][:3, 3], root1[:3, 3] + carry[:3] * [0.04, 0, 0])
     turn = se3.log_so3(pred.roots[0][:3, :3] @ root1[:3, :3].T)
     assert np.allclose(turn, [0.0, 0.0, 0.05])
     assert np.array_equal(pred.roots[0], pred.roots[1])
+    assert pred.angles[knee] == pytest.approx(0.7 + 0.1 * learned_knee)
+    assert pred.angles[elbow] == pytest.approx(0.75)
     # without it the pelvis moves as the angles do: half its last (screw) motion
     plain = D.DifferentialTracker(body, True, D.Settings(velocity=0.5)).predict(s1, s0)
     assert abs(plain.roots[0][0, 3] - root1[0, 3]) < 0.6 * 0.04
+    assert plain.angles[knee] == pytest.approx(0.75)
