@@ -62,6 +62,9 @@ class Settings:
                                       # (priors/general.py), not ``velocity``
                                       # (DifferentialStepper sets it)
     prior_weight: float = 0.01        # pull towards the prediction, relative to the data
+    pose_space_weight: float = 0.03   # one view: pull of the angles towards the pose space
+                                      # learned from capture (``pose_space``), relative to
+                                      # the data (0: none)
     damping: float = 1e-3             # initial Levenberg-Marquardt damping
     collision_weight: float = 3e4     # limb overlap penalty, per square metre
     threads: int = 1                  # >1: views rendered, prepared and (uncalibrated) solved in
@@ -235,6 +238,9 @@ class DifferentialTracker:
     # Per joint angle, the share of its last change carried into the prediction, or None:
     # ``settings.velocity`` for every angle.
     angle_carry = None
+    # One view: the pull towards the pose space learned from capture
+    # (:class:`stepper.PoseSpacePull`), or None; the take's stepper sets it.
+    pose_space = None
 
     def predict(self, state, previous=None):
         """Constant-velocity prediction, damped by ``settings.velocity`` (per angle by
@@ -664,6 +670,13 @@ class DifferentialTracker:
                 prior_delta = self._difference(prior_center, state)
                 A = H + lam * np.diag(diag) + np.diag(reg)
                 rhs = -(g - reg * prior_delta)
+                pose_term = None if self.pose_space is None or V != 1 else \
+                    self.pose_space.system(state.angles, diag, self.layout(1)[2])
+                if pose_term is not None:
+                    # damped like the data (Marquardt): where the image hardly measures an
+                    # angle the pull alone would otherwise take it to the mean in one step
+                    A += pose_term[0] * (1 + lam * np.eye(len(A)))
+                    rhs -= pose_term[1]
                 try:
                     delta = np.linalg.solve(A, rhs)
                 except np.linalg.LinAlgError:
@@ -672,7 +685,11 @@ class DifferentialTracker:
                 system2, cost2, accs2 = self._system(candidate, level, terms_by_view, images_t1,
                                                      em, lazy=True)
                 total_iters += 1
-                if cost2 <= cost * (1 + 1e-9):
+                # the pull towards the pose space is part of what a step must lower (else a step
+                # that only follows it always raises the data's cost and is turned down)
+                pose_cost = (0.0, 0.0) if pose_term is None else (
+                    pose_term[2](state.angles), pose_term[2](candidate.angles))
+                if cost2 + pose_cost[1] <= (cost + pose_cost[0]) * (1 + 1e-9):
                     if s.em and it == 0:
                         # the support maps' EM step at the accepted pose; the costs do not
                         # change with the weights, the normal equations are made with them

@@ -116,6 +116,8 @@ class DifferentialStepper(Stepper):
         if calibrated and self.settings.learned_carry:
             self.tracker.angle_carry, self.tracker.root_carry = learned_carry(
                 body, fps, self.settings.velocity)
+        if self.settings.pose_space_weight > 0:
+            self.tracker.pose_space = PoseSpacePull(body, self.settings.pose_space_weight)
         return self.tracker
 
     def rounds(self, use_bg):
@@ -173,6 +175,69 @@ def learned_carry(body, fps, velocity):
     return angle_carry, root_carry
 
 
+class PoseSpacePull:
+    """One view's pull of the differential tracker's angles towards the pose space learned
+    from capture (:class:`general.MotionModel`: the probabilistic PCA of captured poses).
+
+    One view measures the limbs across its line of sight and leaves their depth free: a hip's
+    abduction and turn, a shoulder's, move the knee, foot or elbow towards the camera at little
+    cost in the image. The step's weak pull towards the prediction keeps whatever depth the
+    last frames drifted to: over walk131_single the feet and elbows wandered 0.1-0.3 m in depth
+    while their images stayed within 10-15 px. The pose space's Gaussian is weak along the ways
+    people move and strong across them, so in the directions the image leaves free it draws
+    the limbs back to poses people make. It is part of the step's cost (a step must lower the
+    image cost and the pull together) and scaled like the pull towards the prediction:
+    ``weight`` times the median data curvature of the angles, negligible where the image
+    measures them (two views or more get none: :meth:`DifferentialTracker._step`).
+
+    Parameters
+    ----------
+    body : BodyModel
+    weight : float
+        The pull's median curvature over the data's (``Settings.pose_space_weight``).
+    """
+
+    def __init__(self, body, weight):
+        model = MotionModel.load()
+        index = {name: i for i, name in enumerate(model.dof_names)}
+        known = np.array([name in index for name in body.dof_names])
+        rows = np.array([index[name] for name in np.asarray(body.dof_names)[known]], int)
+        # angles the model does not know: a zero mean and no precision (left alone)
+        self.mean = np.zeros(body.n_dofs)
+        self.precision = np.zeros((body.n_dofs, body.n_dofs))
+        self.mean[known] = model.pose_mean[rows]
+        self.precision[np.ix_(known, known)] = np.linalg.inv(
+            model.pose_cov[np.ix_(rows, rows)])
+        self.weight = float(weight)
+        self._median_precision = float(np.median(np.diag(self.precision)))
+
+    def system(self, angles, diag, angle_cols):
+        """``(W, g, cost)``: the curvature and gradient of ``|angles - mean|^2_W`` over all
+        parameters, in the units of the data's normal equations (half the cost's), and the
+        function ``cost(angles)``.
+
+        Parameters
+        ----------
+        angles : array, shape (n_dofs,)
+        diag : array, shape (P,)
+            The diagonal of the data's normal equations at ``angles``.
+        angle_cols : array of int
+            The angles' columns among the P parameters.
+        """
+        data = float(np.median(diag[angle_cols]))
+        Wa = self.precision * (self.weight * (data + 1e-12) / (self._median_precision + 1e-12))
+        W = np.zeros((len(diag), len(diag)))
+        W[np.ix_(angle_cols, angle_cols)] = Wa
+        g = np.zeros(len(diag))
+        g[angle_cols] = Wa @ (angles - self.mean)
+
+        def cost(a):
+            x = a - self.mean
+            return float(x @ Wa @ x)
+
+        return W, g, cost
+
+
 class _DifferentialPass:
     """One pass of the differential tracker: the last two poses, images and renders."""
 
@@ -195,4 +260,4 @@ class _DifferentialPass:
         return new, report
 
 
-__all__ = ["Stepper", "DifferentialStepper", "learned_carry"]
+__all__ = ["Stepper", "DifferentialStepper", "learned_carry", "PoseSpacePull"]

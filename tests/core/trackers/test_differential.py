@@ -436,3 +436,55 @@ def test_learned_carry_predicts_the_pelvis_and_the_legs(body):
     plain = D.DifferentialTracker(body, True, D.Settings(velocity=0.5)).predict(s1, s0)
     assert abs(plain.roots[0][0, 3] - root1[0, 3]) < 0.6 * 0.04
     assert plain.angles[knee] == pytest.approx(0.75)
+
+
+def test_one_view_pulls_the_angles_towards_the_pose_space(body):
+    from zoopraxis.core.priors.general import MotionModel
+    from zoopraxis.core.trackers.stepper import DifferentialStepper, PoseSpacePull
+
+    model = MotionModel.load()
+    tracker = DifferentialStepper().prepare(body, True, 30.0)
+    pull = tracker.pose_space
+    assert isinstance(pull, PoseSpacePull) and pull.weight == tracker.settings.pose_space_weight
+    assert pull.weight > 0
+    knee = body.dof_index("l_knee_flex")
+    assert pull.mean[knee] == pytest.approx(
+        model.pose_mean[list(model.dof_names).index("l_knee_flex")])
+    assert np.allclose(pull.precision, pull.precision.T)
+    assert np.all(np.linalg.eigvalsh(pull.precision) > 0)
+    off = DifferentialStepper(D.Settings(pose_space_weight=0.0)).prepare(body, True, 30.0)
+    assert off.pose_space is None
+
+    # a pose off the space: a hip turned out and a straight, twisted arm
+    p0, _ = two_poses(body)
+    for name, value in (("l_hip_rot", 0.6), ("r_shoulder_rot", 0.8), ("l_hip_abd", 0.3)):
+        p0.angles[body.dof_index(name)] = value
+    _, _, angle_cols, P = tracker.layout(1)
+    diag = np.random.default_rng(3).uniform(0.5, 2.0, P)
+    W, g, cost = pull.system(p0.angles, diag, angle_cols)
+    # scaled like the pull towards the prediction: its median curvature a share of the data's
+    assert np.median(np.diag(W)[angle_cols]) == pytest.approx(
+        pull.weight * np.median(diag[angle_cols]), rel=0.2)
+    assert not W[:6].any() and not g[:6].any()
+    # g is half the cost's gradient, as in the data's normal equations
+    x = p0.angles.copy()
+    h = 1e-6
+    numeric = np.array([(cost(x + h * e) - cost(x - h * e)) / (2 * h) for e in np.eye(len(x))])
+    assert np.allclose(g[angle_cols], numeric / 2, atol=1e-6)
+    assert cost(pull.mean) == 0.0 and cost(x) > 0
+
+    # two views measure the depth: the step is the same with and without the pull
+    cams = ring_of_cameras(2, 3.5, 1.3, [0, 0, 0.9], SIZE, 350)
+    p0, p1 = two_poses(body)
+    frames = model_plates(body, [p0, p1], cams)
+    two = D.State(np.stack([p0.root] * 2), p0.angles.copy(), cams)
+    steps = [t.step(two, prepared(frames[0], t.settings, True),
+                    prepared(frames[1], t.settings, True))[0] for t in (tracker, off)]
+    assert np.array_equal(steps[0].angles, steps[1].angles)
+    # one view: the pull is felt, and the step still follows the image
+    one = D.State(p0.root[None], p0.angles.copy(), cams[:1])
+    ims = [[f[0]] for f in frames]
+    steps = [t.step(one, prepared(ims[0], t.settings, True),
+                    prepared(ims[1], t.settings, True)) for t in (tracker, off)]
+    assert not np.array_equal(steps[0][0].angles, steps[1][0].angles)
+    assert steps[0][1].iou[0] > 0.95
