@@ -37,6 +37,7 @@ from zoopraxis.core.body import fit3d  # noqa: E402
 from zoopraxis.core.synthetic import synth  # noqa: E402
 from zoopraxis.core.body.joints import JOINT_INDEX, STANDARD_JOINTS  # noqa: E402
 from zoopraxis.core.files.markers import Anchor  # noqa: E402
+from zoopraxis.core.initialize.options import InitOptions  # noqa: E402
 
 DATA = Path(os.environ.get("ZOOPRAXIS_SHARED_DATA",
                            Path(__file__).resolve().parents[2] / "shared" / "data"))
@@ -59,8 +60,9 @@ CASES = {
 
 # Options of ``track`` beyond a case's spec: the views of these synthetic takes are 2-3 m from
 # the walker, so "walk1-near" is "walk1-uncal" with the view's perspective fitted and tracked
-# through (``track --perspective``).
-CASE_OPTIONS = {"walk1-near": {"perspective": True}}
+# through (``track --perspective``, which the command line passes as the initialization's
+# ``InitOptions(perspective=True)``; ``track`` tracks through the perspective it fitted).
+CASE_OPTIONS = {"walk1-near": {"init_options": InitOptions(perspective=True)}}
 
 # A frame more than this far off (mean over the joints) is lost, whatever its status says.
 OFF_MM = 150.0
