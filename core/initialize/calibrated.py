@@ -16,12 +16,15 @@ class _CalibratedFit(_Fit):
 
     calibrated = True
 
+    dims_prior = None       # (mean, sigma) of the lengths (proportions.ProportionsPrior)
+
     def __init__(self, kin, obs, weights, cameras, views, anchors, dims0, fit_dims, warnings):
         super().__init__(kin, obs, weights, views, anchors, dims0, fit_dims, warnings)
         self.cams = cameras
 
     def options(self, state, f, fit_dims):
-        return dict(free_root=True, fit_dims=fit_dims, calibrated=True)
+        return dict(free_root=True, fit_dims=fit_dims, calibrated=True,
+                    dims_prior=self.dims_prior)
 
     def _state(self, root, angles, dims, size=1.0):
         return _State(np.array(dims, float), size, root[None].copy(), angles[None].copy(),

@@ -71,6 +71,24 @@ ONE_VIEW_LENGTHS_NOTE = (
     "in the add-on)")
 _MIN_FRAME_JOINTS = 6      # joints a frame needs in its best view to pose the body
 
+# Lengths whose prior, when every anchor is clicked in one view, is centred on the captured
+# performers' mean proportion (the learned proportions prior, priors/proportions.py) instead of
+# the template's, in calibrated views. One view bounds a length only from below: a longer bone
+# fits the same clicks turned in depth, so the prior's centre decides the length, and the
+# limb's depth with it. The
+# template's forearm is 0.9 of its upper arm; the captured performers' is 0.64 (0.213 of the
+# template's size, spread 12 %; anthropometric tables give 0.79), and the rendered one-view
+# sets' performers' 0.65-0.77. Fitted from one calibrated side view, the forearm came out
+# 210-250 mm against 185-202 true, its far end turned 90-130 mm in depth at the clicked frame
+# (walk02_single: the wrist 170-200 mm off there after alignment). Centred on the learned mean
+# (three sets of clicks): walk131_single 72.5 -> 66.0 mm after alignment, walk02_single 56.3
+# -> 50.4, nav09_single 47.7 -> 46.7. The learned mean of every length did worse (74.3, 54.8,
+# 54.3: its shank, 1.07 of the thigh, is longer than these performers' 0.95-1.02), and so did
+# its spreads with it (73.9, 51.9, 57.3). Uncalibrated views keep the template's: bodies of the
+# template's build (tests, synthetic takes) went from under 40 mm to 58 there, and the rendered
+# sets (clicks of seed 7) moved by +1.7, -18.0 and +4.9 mm.
+ONE_VIEW_LEARNED_LENGTHS = ("forearm",)
+
 
 def _observations(anchors, views):
     """Clicks as an array (F, V, 17, 2), NaN where not clicked."""
@@ -222,6 +240,9 @@ def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None,
             if not dims:
                 # start from the proportions' mean (at the template's size)
                 fit.dims0 = fit.dims_prior[0].copy()
+    if calibrated and fit_dims and proportions is None and \
+            all(_seen_twice(a, views) < _MIN_FRAME_JOINTS for a in anchors):
+        fit.dims_prior = one_view_dims_prior(kin)
     pose_prior = resolve_pose_prior(pose_prior, template)
     fit.prior = None if pose_prior is None else \
         pose_prior.with_broad(kin.prior_mean, kin.prior_sigma)
@@ -234,6 +255,20 @@ def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None,
     if fit_dims and all(_seen_twice(a, views) < _MIN_FRAME_JOINTS for a in anchors):
         result.notes.append(ONE_VIEW_LENGTHS_NOTE)
     return result
+
+
+def one_view_dims_prior(kin):
+    """``(mean, relative sigma)`` of the lengths (``kin``'s ``LENGTH_DIMS``) fitted to frames
+    each clicked in one view: the template's proportions within ``DIMS_PRIOR_SIGMA``, with the
+    captured performers' mean proportion for ``ONE_VIEW_LEARNED_LENGTHS`` (see there)."""
+    from ..priors.proportions import default_proportions_prior
+    from .problem import DIMS_PRIOR_SIGMA
+
+    learned = default_proportions_prior().mean_sigma()[0]
+    mean = kin.default_dims.copy()
+    index = [LENGTH_DIMS.index(name) for name in ONE_VIEW_LEARNED_LENGTHS]
+    mean[index] = learned[index]
+    return mean, np.full(len(mean), DIMS_PRIOR_SIGMA)
 
 
 def _image_size(cameras, view, uv):
