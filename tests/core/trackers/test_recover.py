@@ -103,6 +103,40 @@ def test_search_leaves_a_fitting_body_alone(body, cams):
     assert np.array_equal(angles, p0.angles)
 
 
+def test_an_arm_inside_the_silhouettes_is_drawn_to_foreground_nothing_explains(body):
+    """The tracker has the left arm folded across the belly, where the silhouettes of three
+    views from the front and sides still cover it (it scores above the arms' threshold for a
+    search); the person's arm is raised sideways, foreground no part of the model explains."""
+    p0 = body.rest_pose(se3.transform(p=[0, 0, 0.95]))
+    true, wrong = p0.copy(), p0.copy()
+    true.angles[body.dof_index("l_shoulder_abd")] = 1.4
+    true.angles[body.dof_index("l_elbow_flex")] = 0.3
+    wrong.angles[body.dof_index("l_shoulder_flex")] = 0.5
+    wrong.angles[body.dof_index("l_shoulder_abd")] = -0.4
+    wrong.angles[body.dof_index("l_elbow_flex")] = 2.2
+    cams = [ring_of_cameras(1, 3.5, 1.3, [0, 0, 0.9], SIZE, 350, start_angle=a)[0]
+            for a in (4.9, 5.5, 6.1)]
+    sdfs = [signed_distance(lab >= 0) for lab in silhouettes(body, true, cams)]
+    state = D.State(np.stack([wrong.root] * 3), wrong.angles.copy(), list(cams))
+    arm = [body_joint(body, "l_elbow"), body_joint(body, "l_wrist")]
+
+    def search(**kw):
+        s = LimbSearch(body, seed=3, **kw)
+        angles, moved = s.search(state, sdfs, silhouettes(body, wrong, cams))
+        error = np.linalg.norm(body.joints(D.Pose(wrong.root, angles))[arm]
+                               - body.joints(true)[arm], axis=1)
+        return [name for name, _ in moved], error, s.last_scores["left arm"]
+
+    moved, error, score = search()
+    assert score > 0.05                 # inside the silhouettes: not poor enough to search
+    assert moved == ["left arm"] and error.max() < 0.1
+    assert np.linalg.norm(body.joints(wrong)[arm] - body.joints(true)[arm], axis=1).min() > 0.4
+    # drawn to the foreground that nothing explains, as the legs are: without that the arm
+    # stays folded
+    moved, error, _ = search(attract=("leg",))
+    assert moved == [] and error.min() > 0.4
+
+
 def body_joint(body, name):
     from zoopraxis.core.body.joints import JOINT_INDEX
 
@@ -200,7 +234,9 @@ def test_fit_after_a_search_that_moved_nothing_reuses_its_scores(body, cams, mon
     sdfs = [signed_distance(g) for g in grown]
     state = D.State(np.stack([p0.root] * 3), p0.angles.copy(), list(cams))
     fresh = LimbSearch(body).fit(state, sdfs, labels)
-    search = LimbSearch(body)
+    # arms would be drawn into a halo this thick (an arm held to a trunk wider than the
+    # model's): legs only, so that nothing moves
+    search = LimbSearch(body, attract=("leg",))
     angles, moved = search.search(state, sdfs, labels)
     assert moved == []
     # the search's own leg scores count the unexplained pixels (a few points fall there)
