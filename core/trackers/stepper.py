@@ -116,7 +116,11 @@ class DifferentialStepper(Stepper):
         if calibrated and self.settings.learned_carry:
             self.tracker.angle_carry, self.tracker.root_carry = learned_carry(
                 body, fps, self.settings.velocity)
-        if self.settings.pose_space_weight > 0:
+        if calibrated and self.settings.pose_space_weight > 0:
+            # Calibrated only: on the real side-on walk (sports2d, one uncalibrated view, a
+            # panning camera whose background model explains little) the pull shortened the
+            # stride, the legs drawn together under the body where the walker's were spread
+            # (frames called lost 8 -> 24, benchmarks/bench_real.py).
             self.tracker.pose_space = PoseSpacePull(body, self.settings.pose_space_weight)
         return self.tracker
 

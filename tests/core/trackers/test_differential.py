@@ -454,6 +454,8 @@ def test_one_view_pulls_the_angles_towards_the_pose_space(body):
     assert np.all(np.linalg.eigvalsh(pull.precision) > 0)
     off = DifferentialStepper(D.Settings(pose_space_weight=0.0)).prepare(body, True, 30.0)
     assert off.pose_space is None
+    # uncalibrated views keep the steps they had (the real side-on walk's stride shrank)
+    assert DifferentialStepper().prepare(body, False, 30.0).pose_space is None
 
     # a pose off the space: a hip turned out and a straight, twisted arm
     p0, _ = two_poses(body)
