@@ -353,9 +353,8 @@ class LimbSearch:
                 angles = best
                 moved.append((group.name, float(gain)))
                 # what this limb now covers is explained: other limbs must not go there too
-                unexplained = self._clear(unexplained, state.roots, angles, group,
-                                          state.cameras)
-                away = self._clear(away, state.roots, angles, group, state.cameras)
+                unexplained, away = self._clear((unexplained, away), state.roots, angles,
+                                                group, state.cameras)
         # Nothing moved: every limb was scored at ``state``, which is what :meth:`fit` asks
         # for next (with the same silhouettes and support maps).
         self._fit_at = None if moved else (state.roots.tobytes(), state.angles.tobytes(),
@@ -375,24 +374,28 @@ class LimbSearch:
         distance = cv2.distanceTransform((~trunk).astype(np.uint8), cv2.DIST_L2, 3)
         return unexplained & (distance > width)
 
-    def _clear(self, unexplained, roots, angles, group, cameras, radius=4):
+    def _clear(self, masks, roots, angles, group, cameras, radius=4):
+        """Each list of per-view masks in ``masks`` (None where a view has none) without what
+        ``group``'s points cover at ``angles``, dilated by ``radius`` pixels."""
         sel = np.isin(self.point_segment, group.segments)
-        out = []
+        out = [[] for _ in masks]
         for c, cam in enumerate(cameras):
-            u_mask = unexplained[c]
-            if u_mask is None:
-                out.append(None)
+            shape = next((m[c].shape for m in masks if m[c] is not None), None)
+            if shape is None:
+                for o in out:
+                    o.append(None)
                 continue
             T = self.body.seg2world(roots[c], angles)[self.point_segment[sel]]
             X = np.einsum("mij,mj->mi", T[:, :3, :3], self.points[sel]) + T[:, :3, 3]
             uv = np.rint(cam.project(X)).astype(np.intp)
-            h, w = u_mask.shape
+            h, w = shape
             ok = (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
             hit = np.zeros((h, w), np.uint8)
             hit[uv[ok, 1], uv[ok, 0]] = 1
             k = 2 * radius + 1
             hit = cv2.dilate(hit, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k)))
-            out.append(u_mask & (hit == 0))
+            for o, m in zip(out, masks):
+                o.append(None if m[c] is None else m[c] & (hit == 0))
         return out
 
     def fit(self, state, sdfs, labels):
