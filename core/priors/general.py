@@ -125,6 +125,14 @@ class MotionModel:
         B = self.pose_basis
         return B.T @ np.diag(self.pose_std ** 2) @ B + np.diag(self.pose_rest ** 2)
 
+    def shared_dofs(self, dof_names):
+        """The DOFs ``dof_names`` (a body's) shares with the model, in ``dof_names``' order:
+        ``(rows, cols)``, their positions in ``dof_names`` and in :attr:`dof_names`."""
+        index = {name: i for i, name in enumerate(self.dof_names)}
+        rows = np.array([i for i, name in enumerate(dof_names) if name in index], int)
+        cols = np.array([index[dof_names[i]] for i in rows], int)
+        return rows, cols
+
     def mahalanobis(self, angles):
         """Squared Mahalanobis distance of poses to the pose space's Gaussian.
 
@@ -353,12 +361,10 @@ class GeneralMotionPrior:
         self.body, self.model = body, model
         self.fps, self.scale, self.carry_moves = float(fps), float(scale), bool(carry_moves)
         D = body.n_dofs
-        known = [n for n in body.dof_names if n in model.dof_names]
-        if not known:
+        rows, cols = model.shared_dofs(body.dof_names)
+        if not len(rows):
             raise ZoopraxisError(f"motion model shares no DOF with body template "
                                  f"'{body.template}'")
-        rows = np.array([body.dof_names.index(n) for n in known])
-        cols = np.array([model.dof_names.index(n) for n in known])
         k = model.fps / self.fps                                  # frames of the model per frame
         # Per-frame values at the plate's rate, in the body's DOF order.
         self.damping = np.ones(D)

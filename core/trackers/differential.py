@@ -62,9 +62,9 @@ class Settings:
                                       # (priors/general.py), not ``velocity``
                                       # (DifferentialStepper sets it)
     prior_weight: float = 0.01        # pull towards the prediction, relative to the data
-    pose_space_weight: float = 0.01   # one view: pull of the angles towards the pose space
-                                      # learned from capture (``pose_space``), relative to
-                                      # the data (0: none)
+    pose_space_weight: float = 0.01   # one calibrated view: pull of the angles towards the
+                                      # pose space learned from capture (``pose_space``),
+                                      # relative to the data (0: none)
     damping: float = 1e-3             # initial Levenberg-Marquardt damping
     collision_weight: float = 3e4     # limb overlap penalty, per square metre
     threads: int = 1                  # >1: views rendered, prepared and (uncalibrated) solved in

@@ -170,10 +170,11 @@ def learned_carry(body, fps, velocity):
     """
     model = MotionModel.load()
     power = model.fps / fps
-    learned = dict(zip(model.dof_names, model.damping ** power))
-    angle_carry = np.array([learned.get(name, velocity)
-                            if name[2:].startswith(("hip", "knee", "ankle")) else velocity
-                            for name in body.dof_names], float)
+    rows, cols = model.shared_dofs(body.dof_names)
+    legs = np.array([body.dof_names[i][2:].startswith(("hip", "knee", "ankle")) for i in rows],
+                    bool)
+    angle_carry = np.full(body.n_dofs, float(velocity))
+    angle_carry[rows[legs]] = model.damping[cols[legs]] ** power
     root_carry = np.full(6, float(velocity))
     root_carry[:3] = model.root_damping[:3] ** power
     return angle_carry, root_carry
@@ -192,7 +193,8 @@ class PoseSpacePull:
     the limbs back to poses people make. It is part of the step's cost (a step must lower the
     image cost and the pull together) and scaled like the pull towards the prediction:
     ``weight`` times the median data curvature of the angles, negligible where the image
-    measures them (two views or more get none: :meth:`DifferentialTracker._step`).
+    measures them (two views or more get none: :meth:`DifferentialTracker._step`; nor do
+    uncalibrated views: :meth:`DifferentialStepper.prepare`).
 
     Parameters
     ----------
@@ -203,15 +205,12 @@ class PoseSpacePull:
 
     def __init__(self, body, weight):
         model = MotionModel.load()
-        index = {name: i for i, name in enumerate(model.dof_names)}
-        known = np.array([name in index for name in body.dof_names])
-        rows = np.array([index[name] for name in np.asarray(body.dof_names)[known]], int)
+        rows, cols = model.shared_dofs(body.dof_names)
         # angles the model does not know: a zero mean and no precision (left alone)
         self.mean = np.zeros(body.n_dofs)
         self.precision = np.zeros((body.n_dofs, body.n_dofs))
-        self.mean[known] = model.pose_mean[rows]
-        self.precision[np.ix_(known, known)] = np.linalg.inv(
-            model.pose_cov[np.ix_(rows, rows)])
+        self.mean[rows] = model.pose_mean[cols]
+        self.precision[np.ix_(rows, rows)] = np.linalg.inv(model.pose_cov[np.ix_(cols, cols)])
         self.weight = float(weight)
         self._median_precision = float(np.median(np.diag(self.precision)))
 
