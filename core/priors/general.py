@@ -389,6 +389,9 @@ class GeneralMotionPrior:
         self.root_damping = model.root_damping ** k
         self.root_noise = model.root_noise * k
         self.root_velocity_std = model.root_velocity_std * k
+        # The pose space's precision over the model's DOFs (:meth:`pose_log_prior`).
+        self.pose_precision = np.zeros((D, D))
+        self.pose_precision[np.ix_(rows, rows)] = np.linalg.inv(pose_cov)
 
     @property
     def sigma_position(self):
@@ -494,6 +497,21 @@ class GeneralMotionPrior:
 
     def _inside_limits(self, angles, mean, sigma, rng):
         return inside_limits(self.body, angles, mean, sigma, rng)
+
+    def pose_log_prior(self, angles):
+        """Log-density of poses under the pose space's Gaussian, up to a constant:
+        ``-1/2 (phi - mu)^T Sigma_pose^-1 (phi - mu)`` over the model's DOFs.
+
+        Parameters
+        ----------
+        angles : array, shape (N, n_dofs)
+
+        Returns
+        -------
+        log_prior : array, shape (N,)
+        """
+        x = np.asarray(angles, float) - self.pose_mean
+        return -0.5 * np.einsum("nd,nd->n", x @ self.pose_precision, x)
 
     def poses(self, state):
         """Root transforms (n, 4, 4) and angles (n, n_dofs) of the particles."""

@@ -7,7 +7,9 @@ expected pose is the answer and its posterior's spread the pose's uncertainty. T
 differential tracker's images and renders measure the step's grey residual, so that both
 trackers report in one unit. Where the background model gives a foreground mask, the
 filter's likelihood adds a silhouette cue (:data:`SILHOUETTE`, see :mod:`likelihood`), and each
-frame's status also says how the pose sits in the foreground (:func:`coverage_status`).
+frame's status also says how the pose sits in the foreground (:func:`coverage_status`). In one
+calibrated view the cue is stricter and the particles are weighed by the general prior's pose
+space too (:meth:`ParticleStepper.filter_options`).
 
 A pass holds its particle cloud, which a pose cannot restart: passes run in turn, and a pass
 that goes on after another is the same filter stepped further. Every random draw is seeded by
@@ -47,6 +49,13 @@ LIMB_ON_FOREGROUND = 0.5
 
 # Seeds of successive passes' filters are this far apart.
 SEED_STRIDE = 7919
+
+# One calibrated view: the weight of the general prior's pose density in the filter's weights
+# (:class:`particle.ParticleFilter` ``pose_weight``; 1: the learned Gaussian as it is), and
+# the likelihood's points along the limbs' axes that the silhouette cue checks, seen or not
+# (``likelihood.ImageLikelihood`` ``axis_points``). See :meth:`ParticleStepper.one_view`.
+ONE_VIEW_POSE_WEIGHT = 1.0
+ONE_VIEW_AXIS_POINTS = 5
 
 
 def coverage_status(covered, reference, limb_share=np.nan, drop=COVERAGE_DROP,
@@ -142,11 +151,16 @@ def measure_step(diff, state_t, images_t, images_t1, state_t1, renders_t):
 @dataclass
 class FilterFrame:
     """One frame as a filter's step needs it: the colour images, the shadow-free foreground
-    masks (None: no background) and the differential tracker's prepared images."""
+    masks (None: no background), the differential tracker's prepared images, and for the
+    filter's silhouette cue the foreground with what the background model cannot tell from
+    the person (cast shadows, clothes the floor's shade, pixels it never saw free) and the
+    pixels surely the person (shadow-free, where the background is known)."""
 
     colour: list
     person: list
     images: list
+    foreground: list = None
+    cover: list = None
 
 
 class ParticleStepper(Stepper):
@@ -257,7 +271,11 @@ class ParticleStepper(Stepper):
         images = [prepare_images(to_gray_float(img), settings.levels, settings.smooth_sigma,
                                  fg[c], bgs[c].known if use[c] else None, person[c])
                   for c, img in enumerate(colour)]
-        return FilterFrame(colour, person, images)
+        if not self.one_view():
+            return FilterFrame(colour, person, images, person, None)
+        cover = [None if p is None else p & bgs[c].known if bgs[c].known is not None else p
+                 for c, p in enumerate(person)]
+        return FilterFrame(colour, person, images, fg, cover)
 
     def state_of(self, pose):
         cams = self.take.cameras
@@ -265,6 +283,35 @@ class ParticleStepper(Stepper):
 
     def begin(self, job, index, state, data):
         return _FilterPass(self, index, job[0], state, data)
+
+    def one_view(self):
+        """Whether the take has one view: the filter then leans on the silhouette and the
+        pose space more (:meth:`filter_options`, :meth:`frame_data`)."""
+        return len(self.take.cameras) == 1
+
+    def pose_weight(self):
+        """Weight of the pose space's density in the filter's weights: one view with the
+        general prior only (see :data:`ONE_VIEW_POSE_WEIGHT`)."""
+        return ONE_VIEW_POSE_WEIGHT if self.one_view() and self.prior == "general" else 0.0
+
+    def filter_options(self):
+        """The filter's options for this take's views.
+
+        One view sees neither the depth of the limbs nor a limb that passes behind another:
+        on walk131_single (a side view) the far leg, hidden as it crossed the near one, slid
+        onto the background and stayed there, where its points matched the static background
+        perfectly (the appearance is mapped at the estimate), and foreground the background
+        model never saw free (where the person stood at the start) drew it further. So in one
+        view a point off the foreground counts as the background's, every limb's axis must lie
+        in the foreground seen or not (:data:`ONE_VIEW_AXIS_POINTS`), the coverage draws only
+        pixels surely the person (:meth:`frame_data`), and the particles are weighed by the
+        pose space's density (:meth:`pose_weight`). Several views see what one leaves free;
+        there they are not measured to help (a two-view test of the filter tracking back
+        from its first anchor went past its 50 mm bound, to 89), so they stay one view's.
+        """
+        one = self.one_view()
+        return {"silhouette": self.silhouette, "pose_weight": self.pose_weight(),
+                "axis_points": ONE_VIEW_AXIS_POINTS if one else 0, "background_points": one}
 
     def refine(self, tracking, found, data):
         """The frame's state and report from the filter's step (``found``)."""
@@ -338,9 +385,9 @@ class _FilterPass:
         self.pf = ParticleFilter(stepper.body, stepper.take.cameras, stepper.make_prior(),
                                  n_particles=stepper.particles,
                                  seed=seed + SEED_STRIDE * index, layers=stepper.layers,
-                                 silhouette=stepper.silhouette)
+                                 **stepper.filter_options())
         first = self.pf.start(data.colour, state.pose(0))
-        self.pf.likelihood.set_foreground(data.person)
+        self.pf.likelihood.set_foreground(data.foreground, data.cover)
         self.reference = covered_at(self.pf, state.pose(0))
         stepper.anchor_info[index] = (start, first.ess, self.reference)
 
@@ -349,7 +396,7 @@ class _FilterPass:
 
     def step(self, data):
         stepper = self.stepper
-        found = self.pf.step(data.colour, data.person)
+        found = self.pf.step(data.colour, data.foreground, data.cover)
         stepper.diff.anchor_terms = self.anchor_terms
         new, report = stepper.refine(self, found, data)
         covered, limb_share = silhouette_fit(self.pf, new.pose(0))

@@ -42,7 +42,12 @@ fall on the foreground, and foreground pixels drawn from the mask should fall in
 limb's silhouette (the capsules of the occlusion test); each point and pixel contributes
 ``silhouette * log(floor + (1 - floor) m)``, ``m`` the (softened) mask value or whether a
 capsule covers the pixel. The second half makes the cue two-sided: a limb the model misses
-leaves foreground uncovered.
+leaves foreground uncovered. Three options make it stricter where one view leaves limbs free
+(the particle tracker turns them on for one view): points along every limb's axis are
+checked too, whether its surface was seen or hidden at the reference (``axis_points``); a
+point off the foreground counts as the background's, like a hidden point, instead of matching
+its appearance (``background_points``); and the pixels to cover can be drawn from a stricter
+mask than the one the points are checked against (``set_foreground``'s ``cover``).
 
 Convention: world Z up, metres; cameras ``X_c = R @ X_w + t`` with OpenCV axes and pixels.
 ``seg2world`` arrays map each segment's reference-frame coordinates into the world (see
@@ -233,6 +238,17 @@ class ImageLikelihood(CapsuleTests):
         Foreground pixels drawn per view and frame for the coverage half of the cue.
     silhouette_floor : float
         Likelihood of a point off the foreground (or an uncovered pixel) relative to one on it.
+    axis_points : int
+        Points along each primitive's axis that the silhouette cue also checks, seen or not
+        (0: none). A limb hidden at the reference behind another has no surface points, yet
+        its image lies inside the person's silhouette as much as a seen limb's does: without
+        them one view's far leg, hidden as it passes behind the near one, is free to wander
+        onto the background and stays there.
+    background_points : bool
+        Whether a point off the foreground counts as the background's (``p_occluded``, as a
+        hidden point) rather than compared with its appearance: a limb that slid onto a
+        static background matches it perfectly frame after frame, since the appearance is
+        mapped at the estimate.
     seed : int
         Seed of the pixel draws.
     """
@@ -240,7 +256,8 @@ class ImageLikelihood(CapsuleTests):
     def __init__(self, body, cameras, *, sigma_image=4.0, epsilon=0.1, p_occluded=None,
                  n_points=40, beta=1.0, surface="attached", min_pixels=12, min_cos=0.2,
                  appearance_rate=0.5, keep_frames=4, occlusion_margin=12.0, silhouette=0.5,
-                 silhouette_points=200, silhouette_floor=0.1, seed=0):
+                 silhouette_points=200, silhouette_floor=0.1, axis_points=0,
+                 background_points=False, seed=0):
         if not cameras:
             raise ZoopraxisError("ImageLikelihood: no cameras given")
         for cam in cameras:
@@ -280,6 +297,16 @@ class ImageLikelihood(CapsuleTests):
         self.silhouette = float(silhouette)
         self.silhouette_points = int(silhouette_points)
         self.silhouette_floor = float(silhouette_floor)
+        self.background_points = bool(background_points)
+        if int(axis_points) != axis_points or axis_points < 0:
+            raise ZoopraxisError(f"ImageLikelihood: axis_points must be a whole number >= 0, "
+                                 f"got {axis_points!r}")
+        occ = self.occluders
+        f = (np.arange(int(axis_points)) + 0.5) / max(int(axis_points), 1)
+        # (P, 4) homogeneous points in segment coordinates and their segments
+        self._axis_points = (occ.ends[:, :1] * (1 - f)[None, :, None]
+                             + occ.ends[:, 1:] * f[None, :, None]).reshape(-1, 4)
+        self._axis_segment = np.repeat(occ.segment, len(f))
         self._foreground = [None] * len(self.cameras)
         self.rng = np.random.default_rng(seed)
         self._pools = None
@@ -324,13 +351,20 @@ class ImageLikelihood(CapsuleTests):
         self.surfaces = None
         self._foreground = [None] * len(self.cameras)
 
-    def set_foreground(self, masks):
+    def set_foreground(self, masks, cover=None):
         """Foreground masks of the frame being weighed, for the silhouette cue.
 
         Parameters
         ----------
         masks : list of (array of bool, shape (H, W), or None), or None
-            One per view (None: no cue in that view); None switches the cue off.
+            One per view (None: no cue in that view); None switches the cue off. Where the
+            limbs' points may lie: what a background model cannot tell from the person
+            (cast shadows, clothes the floor's shade, pixels it never saw free) belongs here.
+        cover : list of (array of bool or None), optional
+            Per view, the pixels the limbs must cover (the coverage half of the cue draws
+            its pixels from these): only what is surely the person, without cast shadows or
+            pixels the background model never saw; a limb drawn to cover those leaves the
+            body. Default ``masks``.
         """
         if masks is None:
             self._foreground = [None] * len(self.cameras)
@@ -338,20 +372,24 @@ class ImageLikelihood(CapsuleTests):
         if len(masks) != len(self.cameras):
             raise ZoopraxisError(f"ImageLikelihood: {len(self.cameras)} views but "
                                  f"{len(masks)} foreground masks")
+        if cover is not None and len(cover) != len(self.cameras):
+            raise ZoopraxisError(f"ImageLikelihood: {len(self.cameras)} views but "
+                                 f"{len(cover)} masks to cover")
         out = []
-        for cam, mask in zip(self.cameras, masks):
+        for v, (cam, mask) in enumerate(zip(self.cameras, masks)):
             if mask is None or self.silhouette == 0:
                 out.append(None)
                 continue
             mask = np.asarray(mask, bool)
-            if mask.shape != (cam.height, cam.width):
+            drawn = mask if cover is None or cover[v] is None else np.asarray(cover[v], bool)
+            if mask.shape != (cam.height, cam.width) or drawn.shape != mask.shape:
                 raise ZoopraxisError(f"view '{cam.name}': foreground mask is {mask.shape[1]}x"
                                      f"{mask.shape[0]}, the camera expects "
                                      f"{cam.width}x{cam.height}")
             # Pixels drawn a few pixels inside the outline: the model's limbs are not the
             # person's, and a slightly wider person should not draw limbs sideways.
-            inner = cv2.erode(mask.astype(np.uint8), _ERODE) > 0
-            rows, cols = np.nonzero(inner if inner.any() else mask)
+            inner = cv2.erode(drawn.astype(np.uint8), _ERODE) > 0
+            rows, cols = np.nonzero(inner if inner.any() else drawn)
             if rows.size == 0:
                 out.append(None)
                 continue
@@ -709,6 +747,12 @@ class ImageLikelihood(CapsuleTests):
                 good[part] += b
                 weight[part] += c
         for cam, fg in zip(self.cameras, self._foreground):
+            if fg is None or not len(self._axis_segment):
+                continue
+            for start in range(0, N, _CHUNK):
+                part = slice(start, min(start + _CHUNK, N))
+                per_segment[part] += self._axis_term(cam, seg2world[part], fg[0])
+        for cam, fg in zip(self.cameras, self._foreground):
             if fg is None or not with_coverage:
                 continue
             n_fg += len(fg[1])
@@ -728,6 +772,28 @@ class ImageLikelihood(CapsuleTests):
         return LikelihoodResult(per_segment.sum(axis=1) + coverage, inliers,
                                 weight / max(total, 1), per_segment, coverage, covered,
                                 on_foreground)
+
+    def _axis_term(self, cam, seg2world, mask):
+        """The silhouette cue of the points along the primitives' axes (``axis_points``),
+        summed per segment, (N, S); points outside the image count as on the foreground."""
+        C = self._cam_from_seg(cam, seg2world)                     # (N, S, 3, 4)
+        X = np.einsum("npij,pj->npi", C[:, self._axis_segment],
+                      self._axis_points.astype(np.float32))
+        z = X[..., 2]
+        if cam.has_distortion:
+            uv = cam.project(cam.world_from_cam(X.astype(float))).astype(np.float32)
+            geometry = {"u": uv[..., 0], "v": uv[..., 1], "z": z}
+        else:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                uv = X @ cam.K.T.astype(np.float32)
+                geometry = {"u": uv[..., 0] / z, "v": uv[..., 1] / z, "z": z}
+        m, inside = self._sample(mask, geometry)
+        m = np.where(inside, m, np.float32(1.0))
+        floor = np.float32(self.silhouette_floor)
+        logp = np.float32(self.silhouette) * np.log(floor + (1 - floor) * m)
+        owner = np.zeros((len(self._axis_segment), self.body.n_segments), np.float32)
+        owner[np.arange(len(self._axis_segment)), self._axis_segment] = 1.0
+        return (logp @ owner).astype(np.float64)
 
     @staticmethod
     def _sample(image, geometry):
@@ -754,6 +820,14 @@ class ImageLikelihood(CapsuleTests):
         cos = np.clip(now["cos"], 0.0, 1.0)
         hidden = self._occluded(cam, surf, now)
         q = np.where(inside & ~hidden, cos, np.float32(0.0))
+        on_fg = None
+        if foreground is not None:
+            m, _ = self._sample(foreground[0], now)
+            if self.background_points:
+                # A point on the background is the background's, as a hidden point is a
+                # nearer limb's: its grey value says nothing of the limb (p_occluded),
+                # whether or not it matches.
+                q = q * m
         # eq. (4): sigma = sigma_I / cos(alpha); eq. (10) per pixel; eq. (11) mixes in p_occ.
         inv_sigma = np.maximum(cos, _MIN_COS) / np.float32(self.sigma_image)
         r2 = (diff * inv_sigma) ** 2
@@ -761,9 +835,7 @@ class ImageLikelihood(CapsuleTests):
         gauss = np.float32((1.0 - eps) / np.sqrt(2.0 * np.pi)) * inv_sigma * np.exp(-0.5 * r2)
         p = q * (gauss + np.float32(eps / 256.0)) + (1.0 - q) * np.float32(self.p_occluded)
         logp = np.log(p)
-        on_fg = None
         if foreground is not None:
-            m, _ = self._sample(foreground[0], now)
             floor = np.float32(self.silhouette_floor)
             logp += np.float32(self.silhouette) * np.log(floor + (1 - floor) * m)
         # Sums per group of points, then per segment (a segment may have several groups).

@@ -171,7 +171,7 @@ def systematic_resample(weights, rng):
     return np.searchsorted(cumulative, pointers)
 
 
-def tempered_weights(log_likelihood, min_ess):
+def tempered_weights(log_likelihood, min_ess, log_prior=None):
     """Normalized weights ``w ~ L^b``, with the largest ``b <= 1`` that keeps enough particles.
 
     The likelihood multiplies hundreds of pixels as if independent; neighbouring pixels are
@@ -187,6 +187,9 @@ def tempered_weights(log_likelihood, min_ess):
     log_likelihood : array, shape (N,)
     min_ess : float
         Smallest effective sample size as a share of N (0 disables the tempering).
+    log_prior : array, shape (N,), optional
+        A log-density the weights are multiplied by untempered, ``w ~ L^b p``: a proper
+        density over the pose does not overcount evidence as the pixels do.
 
     Returns
     -------
@@ -197,9 +200,11 @@ def tempered_weights(log_likelihood, min_ess):
     d = np.asarray(log_likelihood, float)
     d = d - d.max()
     target = min_ess * len(d)
+    p = np.zeros_like(d) if log_prior is None else np.asarray(log_prior, float)
 
     def weights(b):
-        w = np.exp(b * d)
+        x = b * d + p
+        w = np.exp(x - x.max())
         return w / w.sum()
 
     w = weights(1.0)
@@ -339,6 +344,12 @@ class ParticleFilter:
         two weighings of all particles. The annealed posterior is narrower than the true one.
     layer_scale, layer_ess : float
         See ``layers``.
+    pose_weight : float
+        Weight of the prior's pose density (``prior.pose_log_prior``, the learned pose
+        space's Gaussian) in the weights, untempered (:func:`tempered_weights`); 0 for none.
+        One view leaves the limbs' depth, and a leg hidden behind the other, to the motion
+        prior alone: particles weighed by the image only wander there into poses no one
+        makes (the walk seen from the side: a far shin raised level behind the near leg).
     **likelihood_options
         Passed to :class:`ImageLikelihood` (``sigma_image``, ``n_points``, ``surface``,
         ``appearance_rate``, ...).
@@ -347,7 +358,7 @@ class ParticleFilter:
     def __init__(self, body, cameras, prior, *, n_particles=1000, seed=0, likelihood=None,
                  appearance="estimate", min_ess=0.1, lost_inliers=0.3,
                  uncertain_spread=0.08, layers=0, layer_scale=1.0, layer_ess=0.5,
-                 **likelihood_options):
+                 pose_weight=0.0, **likelihood_options):
         if int(n_particles) != n_particles or n_particles < 1:
             raise ZoopraxisError(f"ParticleFilter: n_particles must be a positive whole number, "
                                  f"got {n_particles!r}")
@@ -379,6 +390,12 @@ class ParticleFilter:
         self.layers = int(layers)
         self.layer_scale = float(layer_scale)
         self.layer_ess = float(layer_ess)
+        if not pose_weight >= 0:
+            raise ZoopraxisError(f"ParticleFilter: pose_weight must be >= 0, got {pose_weight}")
+        if pose_weight and not hasattr(prior, "pose_log_prior"):
+            raise ZoopraxisError("ParticleFilter: a pose weight needs a prior with "
+                                 "pose_log_prior() (the general motion prior)")
+        self.pose_weight = float(pose_weight)
         self.groups = partitions(body)
         self.param_names = param_names(body)
         self._images = None
@@ -429,7 +446,7 @@ class ParticleFilter:
         self.pose, spread = posterior_mean(roots, angles, self.weights)
         return self._report(roots, angles, np.zeros(self.n_particles), 1.0, spread)
 
-    def step(self, images, foreground=None):
+    def step(self, images, foreground=None, cover=None):
         """Advance one frame: resample, predict, weigh, estimate.
 
         Parameters
@@ -439,6 +456,8 @@ class ParticleFilter:
         foreground : list of (array of bool or None), optional
             The frame's foreground mask per view, for the likelihood's silhouette cue
             (:meth:`likelihood.ImageLikelihood.set_foreground`); default none.
+        cover : list of (array of bool or None), optional
+            The pixels the limbs must cover, per view (``set_foreground``'s ``cover``).
 
         Returns
         -------
@@ -447,7 +466,7 @@ class ParticleFilter:
         if self._images is None:
             raise ZoopraxisError("ParticleFilter: call start() with the first frame first")
         images_now = self._prepare(images)
-        self.likelihood.set_foreground(foreground)
+        self.likelihood.set_foreground(foreground, cover)
         index = systematic_resample(self.weights, self.rng)
         state = self.prior.propagate({k: v[index] for k, v in self.state.items()}, self.rng)
         roots, angles = self.prior.poses(state)
@@ -465,12 +484,18 @@ class ParticleFilter:
                                                     result)
             roots, angles = self.prior.poses(state)
         ll = result.log_likelihood
-        w, self.temper = tempered_weights(ll, self.min_ess)
+        w, self.temper = tempered_weights(ll, self.min_ess, self._log_prior(angles))
         self.state, self._seg2world, self.weights = state, seg2world, w
         self._images = images_now
         self._frame += 1
         self.pose, spread = posterior_mean(roots, angles, w)
         return self._report(roots, angles, ll, float(w @ result.inliers), spread)
+
+    def _log_prior(self, angles):
+        """The pose density's share of the weights (None without ``pose_weight``)."""
+        if not self.pose_weight:
+            return None
+        return self.pose_weight * self.prior.pose_log_prior(angles)
 
     def _anneal(self, images, state, seg2world, previous, result):
         """The annealing passes of partitioned sampling (see ``layers``)."""
@@ -481,7 +506,8 @@ class ParticleFilter:
         for layer in range(self.layers):
             scale = self.layer_scale * 0.5 ** layer
             for cols, segments in self.groups:
-                w, _ = tempered_weights(per_segment.sum(axis=1) + coverage, self.layer_ess)
+                w, _ = tempered_weights(per_segment.sum(axis=1) + coverage, self.layer_ess,
+                                        self._log_prior(state["angles"]))
                 index = systematic_resample(w, self.rng)
                 state = self.prior.perturb({k: v[index] for k, v in state.items()}, cols,
                                            scale, self.rng)

@@ -240,3 +240,33 @@ def test_trackers_make_the_general_prior(body, stepper, tmp_path):
     assert prior.carry_moves == (stepper is ParticleStepper)
     with pytest.raises(ZoopraxisError, match="no such motion model"):
         stepper(prior="general", motion_model=tmp_path / "none.npz")
+
+
+def test_pose_log_prior_is_the_pose_space_gaussian(body, shipped):
+    prior = general.GeneralMotionPrior(body, shipped)
+    pose = start_pose(body, shipped)
+    odd = np.stack([pose.angles, pose.angles])
+    odd[1, body.dof_index("l_knee_flex")] = 1.4            # a bent knee, the other straight
+    odd[1, body.dof_index("l_elbow_flex")] = 1.4
+    idx = [body.dof_names.index(n) for n in shipped.dof_names if n in body.dof_names]
+    assert len(idx) == len(shipped.dof_names)
+    np.testing.assert_allclose(prior.pose_log_prior(odd),
+                               -0.5 * shipped.mahalanobis(odd[:, idx]), rtol=1e-6, atol=1e-6)
+    assert prior.pose_log_prior(odd)[1] < prior.pose_log_prior(odd)[0] - 1
+
+
+def test_one_view_weighs_particles_by_the_pose_space(body):
+    from types import SimpleNamespace
+    from zoopraxis.core.trackers import filter_stepper
+    s = ParticleStepper(prior="general")
+    s.take = SimpleNamespace(cameras=[object()])
+    assert s.pose_weight() == filter_stepper.ONE_VIEW_POSE_WEIGHT > 0
+    one = s.filter_options()
+    assert one["pose_weight"] > 0 and one["axis_points"] > 0 and one["background_points"]
+    s.take = SimpleNamespace(cameras=[object(), object()])
+    assert s.pose_weight() == 0.0
+    assert s.filter_options() == {"silhouette": s.silhouette, "pose_weight": 0.0,
+                                  "axis_points": 0, "background_points": False}
+    s = ParticleStepper(prior="smooth")
+    s.take = SimpleNamespace(cameras=[object()])
+    assert s.pose_weight() == 0.0

@@ -330,3 +330,89 @@ def test_capsule_hits_give_the_coverage_term(take, rng):
     assert 0 < len(some) < len(caps)
     np.testing.assert_array_equal(part[1], hits[1][:, some])
     assert res.coverage.shape == (1,)
+
+
+def test_limbs_off_the_foreground_gain_nothing_and_their_axes_count_unseen(take):
+    """A limb on a static background matches it perfectly from frame to frame; with a
+    foreground mask its points count as the background's (no better than hidden ones), and its
+    axis points, compared whether its surface was seen or not, fall off the silhouette too."""
+    body, cameras, _, roots, angles = take
+    frame = 12
+    raised = angles[frame].copy()
+    raised[body.dof_index("l_shoulder_abd")] = 1.4           # the arm out over the background
+    raised[body.dof_index("l_elbow_flex")] = 0.0
+    mask = silhouette(body, cameras[0], roots[frame], angles[frame])    # where the arm truly is
+    arm = [body.segment_names.index(s) for s in ("l_upper_arm", "l_forearm")]
+    floor, weight = 0.1, 1.0
+    per_point = []
+    for axis_points in (0, 5):
+        lik = likelihood.ImageLikelihood(body, cameras[:1], silhouette=weight, seed=12,
+                                         axis_points=axis_points, background_points=True)
+        # the appearance mapped at the raised arm: it sees the static background
+        plain = evaluate(lik, take, frame, raised[None], reference=raised)
+        lik.set_foreground([mask])
+        kin = BatchKinematics(body)
+        cue = lik.evaluate([likelihood.prepare_image(take[2][frame][0])],
+                           kin.seg2world(roots[frame][None], raised[None]))
+        n = sum(sl.stop - sl.start for (k, _), sl in zip(lik.surfaces[0].groups,
+                                                            lik.surfaces[0].slices) if k in arm)
+        assert n > 20
+        # Matched against the background, the arm's points explain their grey values well...
+        assert plain.per_segment[0, arm].sum() / n > np.log(1 / 256) + 1.0
+        per_point.append(cue.per_segment[0, arm].sum())
+        if axis_points == 0:
+            # ...but on the background they are the background's: p_occluded and off the mask
+            bound = n * (np.log(1 / 256) + weight * np.log(floor) + 1.0)
+            assert per_point[0] < bound
+    off = likelihood.ImageLikelihood(body, cameras[:1], silhouette=weight, seed=12)
+    evaluate(off, take, frame, raised[None], reference=raised)
+    off.set_foreground([mask])
+    compared = off.evaluate([likelihood.prepare_image(take[2][frame][0])],
+                            BatchKinematics(body).seg2world(roots[frame][None], raised[None]))
+    assert compared.per_segment[0, arm].sum() > per_point[0] + n
+    # the axis points add about weight * log(floor) each (the arm's capsules lie off the mask)
+    caps = int(np.isin(lik.occluders.segment, arm).sum())
+    assert caps >= 2
+    assert per_point[1] - per_point[0] < 0.8 * 5 * caps * weight * np.log(floor)
+    # at the true pose the axes lie inside the silhouette: they cost next to nothing
+    lik.set_foreground([mask])
+    true = lik.evaluate([likelihood.prepare_image(take[2][frame][0])],
+                        BatchKinematics(body).seg2world(roots[frame][None], angles[frame][None]))
+    lik0 = likelihood.ImageLikelihood(body, cameras[:1], silhouette=weight, seed=12,
+                                      axis_points=0, background_points=True)
+    evaluate(lik0, take, frame, raised[None], reference=raised)
+    lik0.set_foreground([mask])
+    true0 = lik0.evaluate([likelihood.prepare_image(take[2][frame][0])],
+                          BatchKinematics(body).seg2world(roots[frame][None],
+                                                          angles[frame][None]))
+    assert abs(true.per_segment[0, arm].sum() - true0.per_segment[0, arm].sum()) < 2.0
+    with pytest.raises(ZoopraxisError, match="axis_points must be a whole number"):
+        likelihood.ImageLikelihood(body, cameras[:1], axis_points=-1)
+
+
+def test_coverage_draws_only_the_pixels_given_to_cover(take):
+    """Pixels the background model cannot vouch for (never seen free, cast shadows) may hold
+    limbs but do not draw them: the coverage half of the cue draws from ``cover`` only."""
+    body, cameras, _, roots, angles = take
+    frame = 12
+    raised = angles[frame].copy()
+    raised[body.dof_index("l_shoulder_abd")] = 1.4
+    raised[body.dof_index("l_elbow_flex")] = 0.0
+    lowered = raised.copy()
+    lowered[body.dof_index("l_shoulder_abd")] = 0.1
+    mask = silhouette(body, cameras[0], roots[frame], raised)
+    # the person as the render shows them with the raised arm, but the arm's pixels not vouched
+    arm_only = mask & ~silhouette(body, cameras[0], roots[frame], lowered)
+    cover = mask & ~cv2.dilate(arm_only.astype(np.uint8), np.ones((9, 9), np.uint8)).astype(bool)
+    assert cover.sum() < mask.sum() - 50
+    kin = BatchKinematics(body)
+    T = kin.seg2world(np.broadcast_to(roots[frame], (2, 4, 4)), np.stack([raised, lowered]))
+    lik = likelihood.ImageLikelihood(body, cameras[:1], silhouette=1.0, seed=13)
+    lik.set_foreground([mask])
+    both = lik.coverage_of(T)
+    assert both[1] < both[0] - 0.05                # the lowered arm leaves the arm's pixels bare
+    lik.set_foreground([mask], [cover])
+    only = lik.coverage_of(T)
+    assert abs(only[1] - only[0]) < 0.02 and only[0] > 0.95
+    with pytest.raises(ZoopraxisError, match="1 views but 2 masks to cover"):
+        lik.set_foreground([mask], [cover, cover])

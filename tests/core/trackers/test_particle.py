@@ -231,3 +231,25 @@ def test_annealing_layers_climb_the_likelihood_and_track(arm):
     (plain, plain_best), (annealed, annealed_best) = run(0), run(1)
     assert annealed < 0.035
     assert np.mean(annealed_best - plain_best) > 20.0
+
+
+def test_tempering_leaves_a_pose_prior_untempered(rng):
+    ll = rng.normal(0, 100, 2000)
+    prior = rng.normal(0, 1, 2000)
+    w, b = particle.tempered_weights(ll, 0.1, prior)
+    assert 0 < b < 1 and abs(1 / np.sum(w ** 2) - 200) < 2
+    expected = np.exp(b * (ll - ll.max()) + prior - (b * (ll - ll.max()) + prior).max())
+    np.testing.assert_allclose(w, expected / expected.sum(), rtol=1e-9)
+    # a flat likelihood leaves the prior's weights as they are
+    w, b = particle.tempered_weights(np.zeros(2000), 0.1, prior)
+    assert b == 1.0
+    np.testing.assert_allclose(w, np.exp(prior) / np.exp(prior).sum(), rtol=1e-9)
+
+
+def test_pose_weight_needs_a_pose_density(arm):
+    body, cameras, _, _, _ = arm
+    prior = motion_prior.SmoothMotionPrior(body, active=ARM)
+    with pytest.raises(ZoopraxisError, match="pose weight needs a prior with pose_log_prior"):
+        particle.ParticleFilter(body, cameras, prior, pose_weight=1.0)
+    with pytest.raises(ZoopraxisError, match="pose_weight must be >= 0"):
+        particle.ParticleFilter(body, cameras, prior, pose_weight=-1.0)
