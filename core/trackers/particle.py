@@ -348,8 +348,8 @@ class ParticleFilter:
         Weight of the prior's pose density (``prior.pose_log_prior``, the learned pose
         space's Gaussian) in the weights, untempered (:func:`tempered_weights`); 0 for none.
         One view leaves the limbs' depth, and a leg hidden behind the other, to the motion
-        prior alone: particles weighed by the image only wander there into poses no one
-        makes (the walk seen from the side: a far shin raised level behind the near leg).
+        prior alone, whose pull towards the pose space is as weak as its noise: particles
+        weighed by the image only keep whatever depth the last frames drifted to.
     **likelihood_options
         Passed to :class:`ImageLikelihood` (``sigma_image``, ``n_points``, ``surface``,
         ``appearance_rate``, ...).
