@@ -212,6 +212,22 @@ class DifferentialTracker:
             groups.append(np.array(scale_cols))
         return groups
 
+    def _about_pelvis(self, state):
+        """Calibrated views: the matrix that maps the step's parameters, with the root's twist
+        taken about the pelvis, to those :meth:`retract` applies (a twist about the world
+        origin: ``v_world = v + p x w`` for a pelvis at ``p``); None for scaled-orthographic views.
+
+        About the origin, a performer turning on the spot three metres from it is a turn plus a
+        three-metre swing back: a long, stiff combination the damping and the pull towards the
+        prediction hold back, so the joints' twists took up the turn instead (dance05_hard's
+        pirouette: the pelvis stayed while the spine and hips twisted to their limits).
+        """
+        if not self.calibrated:
+            return None
+        M = np.eye(6 + self.body.n_dofs)
+        M[:3, 3:6] = se3.hat3(state.roots[0][:3, 3])
+        return M
+
     def retract(self, state, delta):
         """Apply a parameter increment to a state, clamping the angles to the joint limits."""
         roots_cols, scale_cols, angle_cols, _ = self.layout(len(state.cameras))
@@ -659,7 +675,11 @@ class DifferentialTracker:
                 if pending is not None:
                     H, g = pending()
                     pending = None
-                diag = np.diag(H).copy()
+                # Calibrated: the root's increment is solved as a twist about the pelvis (see
+                # _about_pelvis), the parameters' pull below is measured in those terms
+                M = self._about_pelvis(state)
+                Hs, gs = (H, g) if M is None else (M.T @ H @ M, M.T @ g)
+                diag = np.diag(Hs).copy()
                 # Pull towards the prediction with a curvature of prior_weight times the median
                 # data curvature of the same kind of parameter: negligible for what the images
                 # determine, decisive for what they don't (a limb hidden in every view, depth
@@ -668,8 +688,16 @@ class DifferentialTracker:
                 for cols in self._param_groups(V):
                     reg[cols] = s.prior_weight * (_median(diag[cols]) + 1e-12)
                 prior_delta = self._difference(prior_center, state)
-                A = H + lam * np.diag(diag) + np.diag(reg)
-                rhs = -(g - reg * prior_delta)
+                if M is not None:
+                    # The body's tilt is pulled by its own curvature (the three rotations'
+                    # median is a tilt's, far larger than a turn's); its turn about the
+                    # vertical not at all: the images always measure it, and any pull left the
+                    # turn to the spine's and hips' twists, which cost less
+                    reg[3:5] = s.prior_weight * diag[3:5]
+                    reg[5] = 0.0
+                    prior_delta[:3] -= M[:3, 3:6] @ prior_delta[3:6]
+                A = Hs + lam * np.diag(diag) + np.diag(reg)
+                rhs = -(gs - reg * prior_delta)
                 pose_term = None if self.pose_space is None or V != 1 else \
                     self.pose_space.system(state.angles, diag, self.layout(1)[2])
                 if pose_term is not None:
@@ -681,6 +709,8 @@ class DifferentialTracker:
                     delta = np.linalg.solve(A, rhs)
                 except np.linalg.LinAlgError:
                     delta = np.linalg.lstsq(A, rhs, rcond=None)[0]
+                if M is not None:
+                    delta = M @ delta
                 candidate = self.retract(state, delta)
                 system2, cost2, accs2 = self._system(candidate, level, terms_by_view, images_t1,
                                                      em, lazy=True)
