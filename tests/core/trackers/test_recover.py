@@ -88,7 +88,11 @@ def test_search_finds_a_kicked_leg(body, cams):
     knee_start = body.joints(p0)[[body_joint(body, "l_knee"), body_joint(body, "l_ankle")]]
     err = np.linalg.norm(knee_found - knee_true, axis=1).max()
     assert np.linalg.norm(knee_start - knee_true, axis=1).max() > 0.3
-    assert err < 0.08
+    # The thigh kicked forward lies in front of the trunk, foreground a leg is not drawn to
+    # (test_legs_are_drawn_only_to_foreground_away_from_the_trunk): the search alone gets the
+    # knee and ankle within 0.115 m (0.08 when legs were drawn there too); the step's refit
+    # from it within 40 mm (test_step_recovers_a_kick_only_with_the_search).
+    assert err < 0.13
     # The other limbs are left alone.
     others = [i for i in range(body.n_dofs) if not body.dof_names[i].startswith("l_")]
     assert np.allclose(angles[others], p0.angles[others])
