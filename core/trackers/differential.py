@@ -33,7 +33,7 @@ from ..body.body import Pose
 from ..body.collision import body_proxies, penalty_system
 from .frames import thread_pool
 from .image_motion import (Accumulated, Stack, Term, accumulate, accumulate_stacked, assemble,
-                           sample_fast)
+                           support_weights)
 from .recover import LimbSearch, unexplained_foreground, unexplained_share
 from ..imaging.render import render, surface_points
 
@@ -213,15 +213,11 @@ class DifferentialTracker:
         return groups
 
     def _about_pelvis(self, state):
-        """Calibrated views: the matrix that maps the step's parameters, with the root's twist
-        taken about the pelvis, to those :meth:`retract` applies (a twist about the world
-        origin: ``v_world = v + p x w`` for a pelvis at ``p``); None for scaled-orthographic views.
-
-        About the origin, a performer turning on the spot three metres from it is a turn plus a
-        three-metre swing back: a long, stiff combination the damping and the pull towards the
-        prediction hold back, so the joints' twists took up the turn instead (dance05_hard's
-        pirouette: the pelvis stayed while the spine and hips twisted to their limits).
-        """
+        """Calibrated views: the matrix from the step's parameters, the root's twist taken about
+        the pelvis at ``p``, to those :meth:`retract` applies (about the world origin: ``v + p x
+        w``); None for scaled orthography. About the origin a turn on the spot is a turn and a
+        swing back as long as ``|p|``, which the pull towards the prediction held back: the
+        spine's and hips' twists took the turn up instead (dance05_hard's pirouette)."""
         if not self.calibrated:
             return None
         M = np.eye(6 + self.body.n_dofs)
@@ -675,8 +671,7 @@ class DifferentialTracker:
                 if pending is not None:
                     H, g = pending()
                     pending = None
-                # Calibrated: the root's increment is solved as a twist about the pelvis (see
-                # _about_pelvis), the parameters' pull below is measured in those terms
+                # calibrated: solved for the root's twist about the pelvis (_about_pelvis)
                 M = self._about_pelvis(state)
                 Hs, gs = (H, g) if M is None else (M.T @ H @ M, M.T @ g)
                 diag = np.diag(Hs).copy()
@@ -689,10 +684,9 @@ class DifferentialTracker:
                     reg[cols] = s.prior_weight * (_median(diag[cols]) + 1e-12)
                 prior_delta = self._difference(prior_center, state)
                 if M is not None:
-                    # The body's tilt is pulled by its own curvature (the three rotations'
-                    # median is a tilt's, far larger than a turn's); its turn about the
-                    # vertical not at all: the images always measure it, and any pull left the
-                    # turn to the spine's and hips' twists, which cost less
+                    # the tilts pulled by their own curvature (the rotations' median is a
+                    # tilt's); the turn about the vertical not at all: the images measure it,
+                    # and a pull left the turn to the spine's and hips' twists, which cost less
                     reg[3:5] = s.prior_weight * diag[3:5]
                     reg[5] = 0.0
                     prior_delta[:3] -= M[:3, 3:6] @ prior_delta[3:6]
@@ -800,30 +794,6 @@ class DifferentialTracker:
         return d
 
     def _em_weights(self, terms_by_view, images_t1, accs, level):
-        """One EM step on the support maps (B&M §2.4): ownership against a static background.
-
-        For each template pixel, the segment's motion predicts ``I(t+1)`` at the moved point
-        (residual ``r_fg``); a static background predicts ``I(t+1)`` at the pixel itself
-        (``r_bg``). The posterior of the segment layer, with the foreground mask as its prior,
-        replaces the pixel's weight. Cameras are assumed static (the background's dominant
-        motion is zero).
-        """
-        sig2 = self.settings.flow_scale ** 2
-        out = {}
-        for c, terms in enumerate(terms_by_view):
-            key = (c, "flow")
-            term = terms[0][1]
-            acc = accs.get(key)
-            if acc is None or term.uv is None:
-                continue
-            # Anchor points carry NaN pixels: they keep their weight.
-            vals, ok = sample_fast(images_t1[c].stacks[level], np.nan_to_num(term.uv, nan=-1.0))
-            r_bg = vals[:, 0] - term.target
-            prior = np.where(term.weight >= self.settings.flow_weight, 0.8, 0.3)
-            p_fg = prior * np.exp(-0.5 * acc.residual ** 2 / sig2)
-            p_bg = (1.0 - prior) * np.exp(-0.5 * r_bg ** 2 / sig2)
-            own = p_fg / (p_fg + p_bg + 1e-300)
-            fg_prior = np.where(term.weight >= self.settings.flow_weight, 1.0, 0.25)
-            weight = np.where(ok, own / fg_prior, 1.0)
-            out[key] = weight
-        return out
+        """One EM step on the support maps (:func:`image_motion.support_weights`)."""
+        return support_weights(terms_by_view, [im.stacks[level] for im in images_t1], accs,
+                               self.settings.flow_scale, self.settings.flow_weight)

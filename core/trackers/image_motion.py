@@ -594,3 +594,49 @@ def assemble(acc, seg_jac, *, root_cols, angle_cols, n_params, scale_col=None):
         H[scale_col, scale_col] = Hl[P, P]
         g[scale_col] = gl[P]
     return H, g
+
+
+def support_weights(terms_by_view, stacks, accs, scale, flow_weight):
+    """One EM step on the support maps (B&M §2.4): ownership against a static background.
+
+    For each template pixel, the segment's motion predicts ``I(t+1)`` at the moved point
+    (residual ``r_fg``); a static background predicts ``I(t+1)`` at the pixel itself
+    (``r_bg``). The posterior of the segment layer, with the foreground mask as its prior,
+    replaces the pixel's weight. Cameras are assumed static (the background's dominant
+    motion is zero).
+
+    Parameters
+    ----------
+    terms_by_view : list of list of (str, Term, float)
+        Each view's terms at one level; the first is the image motion's.
+    stacks : list of Stack
+        ``I(t+1)`` of each view at that level.
+    accs : dict
+        The accumulated residuals by ``(view, name)``.
+    scale : float
+        The grey residuals' scale (``Settings.flow_scale``).
+    flow_weight : float
+        The image motion's weight: template pixels weighed less start from a lower prior.
+
+    Returns
+    -------
+    weights : dict of (int, str) to array
+    """
+    sig2 = scale ** 2
+    out = {}
+    for c, terms in enumerate(terms_by_view):
+        key = (c, "flow")
+        term = terms[0][1]
+        acc = accs.get(key)
+        if acc is None or term.uv is None:
+            continue
+        # Anchor points carry NaN pixels: they keep their weight.
+        vals, ok = sample_fast(stacks[c], np.nan_to_num(term.uv, nan=-1.0))
+        r_bg = vals[:, 0] - term.target
+        prior = np.where(term.weight >= flow_weight, 0.8, 0.3)
+        p_fg = prior * np.exp(-0.5 * acc.residual ** 2 / sig2)
+        p_bg = (1.0 - prior) * np.exp(-0.5 * r_bg ** 2 / sig2)
+        own = p_fg / (p_fg + p_bg + 1e-300)
+        fg_prior = np.where(term.weight >= flow_weight, 1.0, 0.25)
+        out[key] = np.where(ok, own / fg_prior, 1.0)
+    return out
