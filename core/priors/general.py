@@ -133,6 +133,17 @@ class MotionModel:
         cols = np.array([index[dof_names[i]] for i in rows], int)
         return rows, cols
 
+    def pose_space(self, dof_names):
+        """The pose space's Gaussian over a body's DOFs ``dof_names``, in their order: its mean
+        and precision ``(mu, W)``; DOFs the model does not know get a zero mean and no
+        precision (left alone)."""
+        rows, cols = self.shared_dofs(dof_names)
+        mean = np.zeros(len(dof_names))
+        mean[rows] = self.pose_mean[cols]
+        precision = np.zeros((len(dof_names), len(dof_names)))
+        precision[np.ix_(rows, rows)] = np.linalg.inv(self.pose_cov[np.ix_(cols, cols)])
+        return mean, precision
+
     def mahalanobis(self, angles):
         """Squared Mahalanobis distance of poses to the pose space's Gaussian.
 
@@ -379,8 +390,8 @@ class GeneralMotionPrior:
         self.noise_sigma = np.sqrt(np.diag(noise))
         self.velocity_std = np.full(D, median * k)
         self.velocity_std[rows] = model.velocity_std[cols] * k
-        self.pose_mean = np.zeros(D)
-        self.pose_mean[rows] = model.pose_mean[cols]
+        # The pose space's Gaussian over the body's DOFs (:meth:`pose_log_prior`).
+        self.pose_mean, self.pose_precision = model.pose_space(body.dof_names)
         # The drift matrix G, applied as phi - (phi - mu) @ G.T; over the model's DOFs only.
         G = np.zeros((D, D))
         pose_cov = model.pose_cov[np.ix_(cols, cols)]
@@ -389,9 +400,6 @@ class GeneralMotionPrior:
         self.root_damping = model.root_damping ** k
         self.root_noise = model.root_noise * k
         self.root_velocity_std = model.root_velocity_std * k
-        # The pose space's precision over the model's DOFs (:meth:`pose_log_prior`).
-        self.pose_precision = np.zeros((D, D))
-        self.pose_precision[np.ix_(rows, rows)] = np.linalg.inv(pose_cov)
 
     @property
     def sigma_position(self):

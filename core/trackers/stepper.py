@@ -204,13 +204,7 @@ class PoseSpacePull:
     """
 
     def __init__(self, body, weight):
-        model = MotionModel.load()
-        rows, cols = model.shared_dofs(body.dof_names)
-        # angles the model does not know: a zero mean and no precision (left alone)
-        self.mean = np.zeros(body.n_dofs)
-        self.precision = np.zeros((body.n_dofs, body.n_dofs))
-        self.mean[rows] = model.pose_mean[cols]
-        self.precision[np.ix_(rows, rows)] = np.linalg.inv(model.pose_cov[np.ix_(cols, cols)])
+        self.mean, self.precision = MotionModel.load().pose_space(body.dof_names)
         self.weight = float(weight)
         self._median_precision = float(np.median(np.diag(self.precision)))
 
