@@ -34,7 +34,8 @@ from ..body.collision import body_proxies, penalty_system
 from .frames import thread_pool
 from .image_motion import (Accumulated, Stack, Term, accumulate, accumulate_stacked, assemble,
                            support_weights)
-from .recover import LimbSearch, unexplained_foreground, unexplained_share
+from .limb_refit import LimbRefit
+from .recover import LimbSearch
 from ..imaging.render import render, surface_points
 
 
@@ -150,7 +151,7 @@ def _median(x):
     return (s[h - 1] + s[h]) / 2.0
 
 
-class DifferentialTracker:
+class DifferentialTracker(LimbRefit):
     """Gauss-Newton tracker over a body model and a set of views.
 
     Parameters
@@ -594,50 +595,8 @@ class DifferentialTracker:
         state, report = self._step(state_t, images_t, images_t1, previous, renders_t, start, flow)
         if self.search is None:
             return state, report
-        sdfs = [None if im.sdf is None else im.sdf[0][..., 0] for im in images_t1]
-        if all(d is None for d in sdfs):
-            return state, report
-        labels = [r.label for r in report.renders]
-        known = [im.known for im in images_t1]
-        person = [None if d is None else (d < 0 if im.person is None else im.person)
-                  for d, im in zip(sdfs, images_t1)]
-        unexplained = None      # per view, at ``state``: from the search when it ran
-        # One view's silhouette leaves a limb's depth free (and scaled-orthographic views
-        # fit perspective plates only roughly): the search needs two calibrated views.
-        if (self.settings.limb_search and self.calibrated
-                and sum(d is not None for d in sdfs) >= 2):
-            angles, moved = self.search.search(state, sdfs, labels, known, person)
-            unexplained = self.search.last_unexplained
-            if moved:
-                proposal = state.copy()
-                proposal.angles = angles
-                state2, report2 = self._step(state_t, images_t, images_t1, previous, renders_t,
-                                             proposal, flow)
-                # keep the refit only if the whole frame is explained better: the silhouettes
-                # overlap more, and the least-squares cost (image motion, anchor appearance,
-                # contours) is not higher. The moved limbs' image motion compares them with
-                # where they were at t, which the search found wrong: both poses are judged
-                # without it (a limb the tracker had wrong would otherwise always stay wrong).
-                moved_segments = np.concatenate([g.segments for g in self.search.groups
-                                                 if g.name in dict(moved)])
-                if (np.nanmean(report2.iou) > np.nanmean(report.iou)
-                        and self.frame_cost(state2, state_t, images_t1, renders_t, flow,
-                                            moved_segments)
-                        < (1 + self.settings.refit_tolerance)
-                        * self.frame_cost(state, state_t, images_t1, renders_t, flow,
-                                          moved_segments)):
-                    report2.recovered = [name for name, _ in moved]
-                    state, report = state2, report2
-                    labels = [r.label for r in report.renders]
-                    unexplained = None
-        report.limb_fit = self.search.fit(state, sdfs, labels)
-        if unexplained is None:
-            unexplained = [None if p is None else unexplained_foreground(p, lab, k)
-                           for p, lab, k in zip(person, labels, known)]
-        report.unexplained = np.array([
-            np.nan if u is None else unexplained_share(u, lab)
-            for u, lab in zip(unexplained, labels)])
-        return state, report
+        return self._search_limbs(state, report, state_t, images_t, images_t1, previous,
+                                  renders_t, flow)
 
     def _step(self, state_t, images_t, images_t1, previous, renders_t, start, flow=None):
         s = self.settings

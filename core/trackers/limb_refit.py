@@ -1,0 +1,168 @@
+"""The differential tracker's use of the limb search (:mod:`recover`): when the silhouette
+search moves a limb, the frame is solved again from there, and the new pose is kept only if
+the frame is explained better and every moved limb still looks like itself.
+
+The silhouettes alone cannot tell a lost limb from a wider body. A performer in loose clothes
+fills more of the foreground than the model's trunk does, and an arm drawn into that gap
+raises the silhouettes' overlap while leaving the arm's own pixels (walk131_hard, one set of
+clicks: a wrist 50 mm off drawn 260-400 mm away, for the rest of the take). What the arm looked
+like at the anchor frame says which is which: at its true place its points sample the sleeve
+and the hand they sampled then; drawn into the gap, they sample the trunk's clothes. So a moved
+limb is kept only when the anchor's appearance of its visible points fits the new frame no
+worse than at the pose the search started from (an arm: hardly worse, ``APPEARANCE_SLACK``).
+"""
+
+import numpy as np
+
+from ..geometry import se3
+from .recover import unexplained_foreground, unexplained_share
+
+# Fewer visible points of a limb than this, at either pose, leave its appearance unjudged.
+APPEARANCE_MIN_POINTS = 20
+# How much worse (in the cost of :meth:`LimbRefit.limb_appearance`) a moved limb may look than
+# before and still be kept. Legs keep their look (a leg drawn wrong scores 0.3-0.7 worse, one
+# drawn right within 0.03 on the renders); an arm turns, is thin and blurs, and a good move
+# often looks somewhat worse (up to 0.13) while bad ones look up to 0.7 worse. Over click seeds
+# 7, 8, 9 an arm's slack of 0.1 against none: dance05_hard 86.8 / 86.5 mm, punch02 30.7 / 40.9,
+# sword02 30.1 / 41.6, walk131_hard 38.5 / 40.6; arms not judged at all: 85.1, 30.6, 32.2, 48.0.
+APPEARANCE_SLACK = {"leg": 0.0, "arm": 0.1}
+
+
+class LimbRefit:
+    """Mixed into :class:`differential.DifferentialTracker`, whose search, settings, anchor
+    terms and steps it uses."""
+
+    def limb_appearance(self, state, renders, images, segments):
+        """How far the anchor's appearance of ``segments`` is from ``images`` at ``state``.
+
+        Parameters
+        ----------
+        state : State
+        renders : list of RenderResult
+            The model rendered at ``state`` (which points are visible).
+        images : list of ViewImages
+        segments : array of int
+
+        Returns
+        -------
+        cost : float
+            Mean robust (Geman-McClure) grey residual in [0, 1) of the segments' anchor points
+            visible at ``state``, over all views; NaN without an anchor.
+        n : int
+            Points visible.
+        """
+        if self.anchor_terms is None:
+            return float("nan"), 0
+        level = min(self.settings.finest, self.settings.levels - 1)
+        total, n = 0.0, 0
+        for c, at in enumerate(self.anchor_terms[level]):
+            sel = np.isin(at.segment, segments)
+            if not sel.any():
+                continue
+            seg = at.segment[sel]
+            X = se3.apply(self._seg2world(state, c)[seg], at.ref_points[sel])
+            uv = self._camera_at(state.cameras[c], level).project(X)
+            label = renders[c].label
+            h, w = label.shape
+            scale = 2 ** level
+            u = np.rint(uv[:, 0] * scale).astype(np.intp)
+            v = np.rint(uv[:, 1] * scale).astype(np.intp)
+            inside = (u >= 0) & (u < w) & (v >= 0) & (v < h)
+            visible = np.zeros(len(seg), bool)
+            visible[inside] = label[v[inside], u[inside]] == seg[inside]
+            if not visible.any():
+                continue
+            gray = images[c].gray[level]
+            gu = np.clip(np.rint(uv[visible, 0]).astype(np.intp), 0, gray.shape[1] - 1)
+            gv = np.clip(np.rint(uv[visible, 1]).astype(np.intp), 0, gray.shape[0] - 1)
+            r = (gray[gv, gu] - at.target[sel][visible]) / at.scale
+            r *= r
+            total += float(np.sum(r / (1.0 + r)))
+            n += int(visible.sum())
+        return (total / n if n else float("nan")), n
+
+    def _looks_like_itself(self, group, state, renders, state2, renders2, images):
+        """Whether limb ``group`` at ``state2`` fits its anchor appearance no worse than at
+        ``state``, give or take its kind's ``APPEARANCE_SLACK`` (too few visible points at
+        either pose: not judged, True)."""
+        before, n1 = self.limb_appearance(state, renders, images, group.segments)
+        after, n2 = self.limb_appearance(state2, renders2, images, group.segments)
+        if min(n1, n2) < APPEARANCE_MIN_POINTS:
+            return True
+        return after <= before + APPEARANCE_SLACK.get(group.name.split()[-1], 0.0)
+
+    def _search_limbs(self, state, report, state_t, images_t, images_t1, previous, renders_t,
+                      flow):
+        """The limb search after a step (:meth:`DifferentialTracker.step`), and the refit
+        from what it moved when that explains the frame better; returns the frame's state and
+        report, with the limbs' silhouette fit and the foreground left unexplained."""
+        sdfs = [None if im.sdf is None else im.sdf[0][..., 0] for im in images_t1]
+        if all(d is None for d in sdfs):
+            return state, report
+        labels = [r.label for r in report.renders]
+        known = [im.known for im in images_t1]
+        person = [None if d is None else (d < 0 if im.person is None else im.person)
+                  for d, im in zip(sdfs, images_t1)]
+        unexplained = None      # per view, at ``state``: from the search when it ran
+        # One view's silhouette leaves a limb's depth free (and scaled-orthographic views
+        # fit perspective plates only roughly): the search needs two calibrated views.
+        if (self.settings.limb_search and self.calibrated
+                and sum(d is not None for d in sdfs) >= 2):
+            angles, moved = self.search.search(state, sdfs, labels, known, person)
+            unexplained = self.search.last_unexplained
+            if moved:
+                refit = self._refit(state, report, angles, [name for name, _ in moved],
+                                    state_t, images_t, images_t1, previous, renders_t, flow)
+                if refit is not None:
+                    state, report = refit
+                    labels = [r.label for r in report.renders]
+                    unexplained = None
+        report.limb_fit = self.search.fit(state, sdfs, labels)
+        if unexplained is None:
+            unexplained = [None if p is None else unexplained_foreground(p, lab, k)
+                           for p, lab, k in zip(person, labels, known)]
+        report.unexplained = np.array([
+            np.nan if u is None else unexplained_share(u, lab)
+            for u, lab in zip(unexplained, labels)])
+        return state, report
+
+    def _refit(self, state, report, angles, moved, state_t, images_t, images_t1, previous,
+               renders_t, flow):
+        """The frame solved again from ``state`` with the ``moved`` limbs at ``angles``;
+        ``(state, report)`` if kept, else None."""
+        groups = {g.name: g for g in self.search.groups}
+
+        def solve(names):
+            proposal = state.copy()
+            for name in names:
+                dofs = groups[name].dofs
+                proposal.angles[dofs] = angles[dofs]
+            return self._step(state_t, images_t, images_t1, previous, renders_t, proposal,
+                              flow)
+
+        state2, report2 = solve(moved)
+        # a limb drawn into foreground that is not it (a wider trunk, another limb) no
+        # longer looks like the limb of the anchor frame
+        kept = [name for name in moved
+                if self._looks_like_itself(groups[name], state, report.renders, state2,
+                                           report2.renders, images_t1)]
+        if not kept:
+            return None
+        if len(kept) < len(moved):
+            state2, report2 = solve(kept)
+        # Keep the refit only if the whole frame is explained better: the silhouettes overlap
+        # more, and the least-squares cost (image motion, anchor appearance, contours) is not
+        # higher. The moved limbs' image motion compares them with where they were at t,
+        # which the search found wrong: both poses are judged without it (a limb the tracker
+        # had wrong would otherwise always stay wrong).
+        segments = np.concatenate([groups[name].segments for name in kept])
+        if (np.nanmean(report2.iou) > np.nanmean(report.iou)
+                and self.frame_cost(state2, state_t, images_t1, renders_t, flow, segments)
+                < (1 + self.settings.refit_tolerance)
+                * self.frame_cost(state, state_t, images_t1, renders_t, flow, segments)):
+            report2.recovered = kept
+            return state2, report2
+        return None
+
+
+__all__ = ["LimbRefit", "APPEARANCE_MIN_POINTS", "APPEARANCE_SLACK"]
