@@ -14,7 +14,10 @@ From a pose at frame t and the images of t and t+1 in every view, find the pose 
 
 Two persistent cues keep the frame-to-frame motion from drifting (Yamamoto §4): appearance
 taken from the anchor frame, and the silhouette against a background model, both as residuals in
-the same least squares. Joint limits hold after every step.
+the same least squares. On colour plates the anchor's appearance includes its chromaticity
+(colour without brightness, :func:`frames.chromaticity`): a bare forearm over a shirt of its
+grey level, which the grey image cannot tell apart, keeps its colour while it turns and its
+shading changes. Joint limits hold after every step.
 
 Calibrated views share one world pose (Yamamoto eqs. 8-12); uncalibrated views each carry their
 own scaled-orthographic pose of the body and share the joint angles (B&M eq. 28).
@@ -52,6 +55,9 @@ class Settings:
     flow_weight: float = 1.0          # frame-to-frame image motion term
     flow_scale: float = 0.05          # robust scale of grey residuals (images in [0, 1])
     anchor_weight: float = 0.5        # persistent appearance term
+    chroma_weight: float = 0.5        # the anchor's chromaticity (colour plates), relative to
+                                      # the grey anchor at their robust scales
+    chroma_scale: float = 0.02        # robust scale of chromaticity residuals
     silhouette_weight: float = 0.002  # signed-distance term (per pixel^2, relative to grey^2)
     silhouette_scale: float = 3.0     # robust scale of silhouette residuals, pixels
     silhouette_margin: float = 1.0    # contour may stray this far outside the silhouette, px
@@ -170,6 +176,7 @@ class DifferentialTracker(LimbRefit):
         self.prims = body.primitives()
         self.proxies = body_proxies(body)
         self.anchor_terms = None
+        self.chroma_terms = None
         self.search = LimbSearch(body)
         # caches of derived values, read-only once made (see the methods that fill them)
         self._scaled = {}
@@ -406,6 +413,30 @@ class DifferentialTracker(LimbRefit):
         for per_view in self.anchor_terms:
             for t in per_view or []:
                 t.name = "anchor"
+        # and its chromaticity at the same points, where the plates are in colour
+        self.chroma_terms = None
+        if self.settings.chroma_weight > 0 and all(im.chroma is not None for im in images):
+            self.chroma_terms = [None if per_view is None else
+                                 [self._chroma_anchor(t, images[t.view].chroma, level)
+                                  for t in per_view]
+                                 for level, per_view in enumerate(self.anchor_terms)]
+
+    def _chroma_anchor(self, term, chroma, level):
+        """Terms of the anchor's chromaticity channels at the points of its grey term."""
+        u = term.uv[:, 0].astype(np.intp)
+        v = term.uv[:, 1].astype(np.intp)
+        return [Term(term.view, term.segment, term.ref_points, ch[level][v, u, 0].astype(float),
+                     term.weight, self.settings.chroma_scale, f"chroma{k}",
+                     np.full((len(term), 2), np.nan)) for k, ch in enumerate(chroma)]
+
+    @staticmethod
+    def _image_of(images, key, level):
+        """The image (with gradients) that terms named ``key`` sample."""
+        if key == "silhouette":
+            return images.sdf[level]
+        if key.startswith("chroma"):
+            return images.chroma[int(key[6:])][level]
+        return images.stacks[level]
 
     # -- rendering -------------------------------------------------------------------------------
 
@@ -528,8 +559,7 @@ class DifferentialTracker(LimbRefit):
         if not keys:
             return (lambda em=None: (np.zeros((P, P)), np.zeros(P))), 0.0, {}
         seg2world, seg_jac = kin
-        imgs = [images[c].stacks[level] if key != "silhouette" else images[c].sdf[level]
-                for c, key in keys]
+        imgs = [self._image_of(images[c], key, level) for c, key in keys]
         cams = [self._camera_at(state.cameras[c], level) for c, _ in keys]
         total, per_part = accumulate_stacked(stack, imgs, cams, weights, seg2world,
                                              self.body.n_segments,
@@ -553,8 +583,7 @@ class DifferentialTracker(LimbRefit):
         for key, term, weight in terms_by_view[c]:
             if term is None or len(term) == 0 or weight == 0:
                 continue
-            stack = images[c].stacks[level] if term.name != "silhouette" \
-                else images[c].sdf[level]
+            stack = self._image_of(images[c], key, level)
             acc = accumulate(term, stack, cam, seg2world, self.body.n_segments,
                              with_scale=not self.calibrated,
                              extra_weight=em_weights.get((c, key)))
@@ -714,13 +743,19 @@ class DifferentialTracker(LimbRefit):
                 weight = np.where(np.isin(ft.segment, without), 0.0, weight)
             parts = [Term(c, ft.segment, ft.ref_points, ft.target, weight, ft.scale, "flow",
                           ft.uv)]
+            chroma = []
             if self.anchor_terms is not None and s.anchor_weight > 0:
                 at = self.anchor_terms[level][c]
-                at = at.subset(self._visible(at, state_t, level, renders_t))
+                seen = self._visible(at, state_t, level, renders_t)
+                at = at.subset(seen)
                 parts.append(Term(c, at.segment, at.ref_points, at.target,
                                   at.weight * s.anchor_weight, at.scale, "anchor",
                                   np.full((len(at), 2), np.nan)))
-            terms = [("flow", Term.concat(parts, "flow"), 1.0)]
+                if self.chroma_terms is not None and images_t1[c].chroma is not None:
+                    weight = s.chroma_weight * (s.flow_scale / s.chroma_scale) ** 2
+                    chroma = [(t.name, t.subset(seen), weight)
+                              for t in self.chroma_terms[level][c]]
+            terms = [("flow", Term.concat(parts, "flow"), 1.0)] + chroma
             if sil is not None and images_t1[c].sdf is not None and s.silhouette_weight > 0:
                 # distances shrink with the pyramid level: keep pixel units per level
                 terms.append(("silhouette", sil[c], s.silhouette_weight * 4 ** level))

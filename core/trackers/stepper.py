@@ -134,11 +134,12 @@ class DifferentialStepper(Stepper):
         def one(c):
             if not take.use_bg[c]:
                 return prepare_images(to_gray_float(colours[c]), settings.levels,
-                                      settings.smooth_sigma)
+                                      settings.smooth_sigma, colour=colours[c])
             bg = take.backgrounds[c]
             fg = bg.foreground(colours[c])
             return prepare_images(to_gray_float(colours[c]), settings.levels,
-                                  settings.smooth_sigma, fg, bg.known, bg.person(colours[c], fg))
+                                  settings.smooth_sigma, fg, bg.known, bg.person(colours[c], fg),
+                                  colours[c])
 
         return self.tracker.map_views(one, len(colours))
 

@@ -1,0 +1,86 @@
+"""Colour plates: the anchor's chromaticity holds what the grey image cannot tell apart."""
+
+import numpy as np
+import pytest
+
+from zoopraxis.core.body.body import make_body
+from zoopraxis.core.geometry import se3
+from zoopraxis.core.geometry.camera import ring_of_cameras
+from zoopraxis.core.imaging import plates
+from zoopraxis.core.synthetic import synth
+from zoopraxis.core.trackers import differential as D
+from zoopraxis.core.trackers.frames import chromaticity, prepare_images
+
+# Two flat materials of one luma (0.299 R + 0.587 G + 0.114 B = 0.33), BGR: a blue shirt and
+# skin-coloured arms.
+SHIRT = (0.6, 0.3, 0.3)
+SKIN = (0.2, 0.25, 0.55)
+
+
+def test_chromaticity_is_the_colour_without_its_brightness(rng):
+    colour = rng.uniform(0.2, 1.0, (8, 8, 3)).astype(np.float32)
+    bright, dim = chromaticity(colour), chromaticity(0.6 * colour)
+    assert len(bright) == 2
+    assert np.allclose(bright[0], dim[0], atol=0.05) and np.allclose(bright[1], dim[1], atol=0.05)
+    red = np.zeros((4, 4, 3), np.uint8)
+    red[..., 2] = 200
+    assert chromaticity(red)[0].min() > 0.7      # r of pure red
+    grey = np.repeat(rng.integers(0, 255, (6, 6, 1), dtype=np.uint8), 3, axis=2)
+    assert chromaticity(grey) is None and chromaticity(grey[..., 0]) is None
+
+
+def _arm_over_the_shirt(monkeypatch, body, poses, cams):
+    """Plates of ``body`` under flat light, in a flat shirt and flat skin-coloured arms of the
+    shirt's grey level, before a wall of the shirt's colour: in grey, nothing but a flat image."""
+    monkeypatch.setitem(synth._MATERIALS, "flat_shirt", (SHIRT, 0.0, 1.0, 0.0))
+    monkeypatch.setitem(synth._MATERIALS, "flat_skin", (SKIN, 0.0, 1.0, 0.0))
+    arms = [k for k, n in enumerate(body.segment_names) if n.endswith(("upper_arm", "forearm"))]
+    materials = ["flat_skin" if k in arms else "flat_shirt" for k in range(body.n_segments)]
+    sb = synth.SynthBody(list(body.segment_names), materials, body.primitives(),
+                         np.stack([body.seg2world(p) for p in poses]))
+    # behind, a wall of the shirt's colour as it is lit (the light comes from behind the body)
+    bgs = [np.full((240, 320, 3), 0.35 * np.array(SHIRT), np.float32) for _ in cams]
+    scene = synth.Scene(sb, cams, bgs, light=np.array([0.0, 1.0, 0.0]))
+    return [[scene.render_frame(f, c) for c in range(len(cams))] for f in range(len(poses))]
+
+
+@pytest.mark.parametrize("chroma_weight", [0.5, 0.0])
+def test_the_anchors_colour_tells_an_arm_from_a_shirt_of_its_grey(monkeypatch, chroma_weight):
+    """A forearm across the belly, skin-coloured on a shirt of the same grey level. Moved to
+    another place over the shirt, it looks as much like itself in grey as where it is; the
+    anchor's chromaticity tells the two apart: in the appearance that judges the limb search's
+    moves, and in the step, which brings the arm back."""
+    body = make_body("full")
+    p0 = body.rest_pose(se3.transform(p=[0, 0, 0.95]))
+    for name, value in (("l_shoulder_flex", 0.3), ("l_elbow_flex", 1.6), ("l_shoulder_rot", 1.0)):
+        p0.angles[body.dof_index(name)] = value
+    wrong = p0.copy()
+    wrong.angles[body.dof_index("l_shoulder_rot")] = 0.7     # the forearm higher on the belly
+    cams = sorted(ring_of_cameras(8, 3.5, 1.3, [0, 0, 0.9], (320, 240), 350),
+                  key=lambda c: (c.R.T @ -c.t)[1])[:2]         # the two facing the body
+    settings = D.Settings(chroma_weight=chroma_weight, limb_search=False)
+    (frame,) = _arm_over_the_shirt(monkeypatch, body, [p0], cams)
+    images = [prepare_images(plates.to_gray_float(image), settings.levels,
+                             settings.smooth_sigma, label >= 0, colour=image)
+              for image, label in frame]
+    tracker = D.DifferentialTracker(body, True, settings)
+    right = D.State(np.stack([p0.root] * 2), p0.angles.copy(), list(cams))
+    moved = D.State(np.stack([p0.root] * 2), wrong.angles.copy(), list(cams))
+    tracker.set_anchor(right, images, tracker.render_views(right))
+    arm = np.array([body.segment_names.index(n) for n in ("l_upper_arm", "l_forearm")])
+    shift = 1000 * np.linalg.norm(body.joints(wrong) - body.joints(p0), axis=1).max()
+    assert shift > 60
+    looks = [tracker.limb_appearance(s, tracker.render_views(s), images, arm)
+             for s in (right, moved)]
+    assert min(n for _, n in looks) > 50
+    assert looks[0][0] < 0.05
+    # a step on this frame from the wrong arm: the image motion says "stay", the grey
+    # anchor nothing; the colour brings the arm back
+    state, _ = tracker.step(moved, images, images)
+    err = 1000 * np.linalg.norm(body.joints(state.pose()) - body.joints(p0), axis=1).max()
+    if chroma_weight > 0:
+        assert looks[1][0] > looks[0][0] + 0.1
+        assert err < 25
+    else:
+        assert looks[1][0] < looks[0][0] + 0.05
+        assert err > 40
