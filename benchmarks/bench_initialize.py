@@ -41,6 +41,7 @@ from zoopraxis.core.geometry.triangulate import procrustes_mpjpe  # noqa: E402
 from zoopraxis.core.initialize.flips import FLIP_PARTS, LR_PAIRS  # noqa: E402
 from zoopraxis.core.initialize.refine import refine_dims  # noqa: E402
 from zoopraxis.core.initialize.run import initialize  # noqa: E402
+from zoopraxis.core.priors.basis import PoseBasis  # noqa: E402
 from zoopraxis.core.priors.pose import PosePrior, default_pose_prior  # noqa: E402
 from zoopraxis.core.synthetic import synth  # noqa: E402
 from zoopraxis.core.geometry.camera import PinholeCamera, look_at, ring_of_cameras  # noqa: E402
@@ -616,7 +617,8 @@ def held_out_subjects_cases(table, rng, n):
     take, a random frame). Rows: the pose prior of the four takes it had before cmu_more
     (those of the fold left out) with the template's proportions; the prior of all other
     performers with the template's proportions (what ships); that prior with the proportions
-    prior of the other performers (``initialize(..., proportions=...)``); and, beside them,
+    prior of the other performers (``initialize(..., proportions=...)``); that prior with the
+    pose basis of the other performers (``initialize(..., pose_basis=...)``); and, beside them,
     the performer's true lengths kept. Each row also apart for the performers captured with
     their own lengths and for those on cgspeed's one Daz figure."""
     from zoopraxis.core.files import cmu
@@ -637,12 +639,16 @@ def held_out_subjects_cases(table, rng, n):
         four = PosePrior(pose.samples[keep], pose.dof_names, pose.template,
                               pose.takes[keep]) if keep.any() else None
         proportions = ProportionsPrior.load(exclude=fold)
+        basis = PoseBasis.load(exclude_subjects=fold)
         variants = (("prior of the 4 takes before cmu_more, template proportions", four,
-                     None, False),
-                    ("prior of the other performers, template proportions", pose, None, False),
-                    ("prior and proportions of the other performers", pose, proportions, False),
-
-                    ("prior of the other performers, true lengths kept", pose, None, True))
+                     None, None, False),
+                    ("prior of the other performers, template proportions", pose, None, None,
+                     False),
+                    ("prior and proportions of the other performers", pose, None, proportions,
+                     False),
+                    ("prior and pose basis of the other performers", pose, basis, None, False),
+                    ("prior of the other performers, true lengths kept", pose, None, None,
+                     True))
         for subject in fold:
             for _ in range(per_subject):
                 path = takes[subject][rng.integers(len(takes[subject]))]
@@ -652,13 +658,14 @@ def held_out_subjects_cases(table, rng, n):
                 cams = ring(1, rng, FHD_100M, aim_at(X))
                 anchor = [Anchor(0, clicks(cams, X, rng))]
                 cameras = {c.name: c for c in cams}
-                for label, prior, props, true_lengths in variants:
+                for label, prior, pose_basis, props, true_lengths in variants:
                     if prior is None:
                         continue
                     options = dict(dims=fit3d.dims_from_joints(joints[::30]),
                                    fit_dims=False) if true_lengths else {}
                     result = initialize(anchor, cameras, calibrated=False,
-                                             pose_prior=prior, proportions=props, **options)
+                                             pose_prior=prior, proportions=props,
+                                             pose_basis=pose_basis, **options)
                     error = 1000 * procrustes_mpjpe(result.joints3d(0), X)
                     rows.setdefault(label, []).append(error)
                     kind = "Daz figure" if take.skeleton == "cmu_daz" else "own lengths"

@@ -120,7 +120,7 @@ def _seen_twice(anchor, views):
 
 def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None, fit_dims=True,
                views=None, pose_prior="default", flips=None, camera_tilt=CAMERA_TILT_DEG,
-               perspective=False, proportions=None):
+               perspective=False, proportions=None, pose_basis=None):
     """Pose, angles and body dimensions from the clicked joints of anchor frames (§2.6).
 
     Parameters
@@ -171,6 +171,18 @@ def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None,
         57.2 for those with their own lengths, 88.2 instead of 72.9 for those on cgspeed's Daz
         figure), and random bodies of the template's proportions came out 75 mm off instead
         of under 40 (benchmarks/bench_initialize.py --only held-out-subjects).
+    pose_basis : basis.PoseBasis, "default", path or None
+        Uncalibrated, in frames clicked in one view with a pose prior: a basis of captured 3D
+        joint sets (``priors/basis.py``, ``tools/learn_pose_basis.py``) fitted to the clicks
+        gives more starts (with the lengths measured on them, their prior centred there) and
+        its density of the 3D joints joins the pose prior in choosing the limbs' depth signs
+        and the search. ``"default"``: the shipped one. Not the default (None): on held-out
+        CMU performers in one view it takes the error from 64.2 mm to 45.0 (36 frames,
+        Procrustes-aligned; performers and basis held out alike), but random everyday poses
+        of the body model, unlike the captures', from 39.9 to 59.6 (30 poses,
+        ``bench_initialize.py --only limits``); a broad Gaussian of the body's everyday poses
+        mixed into its density kept them better (6 of them: 61.5 against 43.5 without the
+        basis) but lost the held-out gain (12 frames: 61.5 against 38.7 and 55.7 without).
 
     Returns
     -------
@@ -246,6 +258,10 @@ def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None,
     pose_prior = resolve_pose_prior(pose_prior, template)
     fit.prior = None if pose_prior is None else \
         pose_prior.with_broad(kin.prior_mean, kin.prior_sigma)
+    if not calibrated and fit.prior is not None:
+        from ..priors.basis import resolve_pose_basis
+
+        fit.basis = resolve_pose_basis(pose_basis)
     fit.flips = flips
     result = fit.run()
     if calibrated:

@@ -4,12 +4,16 @@ from the pose prior's own poses."""
 
 import numpy as np
 
+from ..body.body import LENGTH_DIMS
+from ..body.fit3d import dims_from_joints
 from ..geometry import se3
+from ..priors.basis import body_size
 from ..geometry.ortho import ScaledOrthoCamera
 from ..geometry.triangulate import similarity_from_points
 from .fit import _Fit
-from .problem import PRIOR_WEIGHT, _fit, _rho_px, _State
-from .starts import _TORSO, _affine_camera, _fit_3d, _ortho_camera
+from .problem import (CLICK_SIGMA_PX, DIMS_PRIOR_SIGMA, DIMS_RANGE, PRIOR_WEIGHT, _fit,
+                      _rho_px, _State)
+from .starts import _TORSO, _affine_camera, _fit_3d, _fit_limbs_3d, _ortho_camera
 
 _MIN_VIEW_JOINTS = 4       # an uncalibrated view needs this many clicks to place its camera
 # A frame seen in one view is also searched from the prior's own poses whose projection best
@@ -18,6 +22,13 @@ _MIN_VIEW_JOINTS = 4       # an uncalibrated view needs this many clicks to plac
 EXEMPLAR_STARTS = 2
 EXEMPLAR_APART_DEG = 20.0
 EXEMPLAR_POOL = 4000
+# A frame seen in one view is also searched from the pose basis' fits to its clicks
+# (priors/basis.py): the joints of this many of its best local minima, posed by inverse
+# kinematics with the lengths measured on them (and the lengths' prior centred there).
+BASIS_STARTS = 2
+# Weight of the basis' density of the 3D joints in the score that chooses the limbs' depth
+# signs and the search (nats per nat).
+BASIS_WEIGHT = 1.0
 
 
 class _UncalibratedFit(_Fit):
@@ -67,22 +78,35 @@ class _UncalibratedFit(_Fit):
         frame = self.frames[f]
         parts = list(self.ambiguous_parts.get(frame, []))
         found = []
-        searches = [(True, None), (False, None)] + [(True, s) for s in self._exemplars(f)]
-        for in_fit, start in searches:
+        own = self.dims_prior
+        searches = [(True, None, own), (False, None, own)] + \
+            [(True, s, own) for s in self._exemplars(f)] + \
+            [(True, s, own if not self.fit_dims else (s.dims.copy(), DIMS_PRIOR_SIGMA))
+             for s in self._basis_starts(f)]
+        for in_fit, start, dims_prior in searches:
             self._prior_in_fit, self.ambiguous = in_fit, ambiguous
-            self._start = start
+            self._start, self.dims_prior = start, dims_prior
             self.ambiguous_parts[frame] = list(parts)
             try:
                 state = super()._frame(f)
             finally:
                 self._prior_in_fit, self._start = True, None
-            if not in_fit:
-                state, _, _ = _fit(self.kin, self.obs[f:f + 1], self.weights[f:f + 1], state,
-                                   **self.options(state, f, fit_dims=self.fit_dims))
+            try:
+                if not in_fit:
+                    state, _, _ = _fit(self.kin, self.obs[f:f + 1], self.weights[f:f + 1],
+                                       state, **self.options(state, f, fit_dims=self.fit_dims))
+            finally:
+                self.dims_prior = own
             found.append((float(self._score(state, f, state.angles)[0]), len(found), state,
-                          self.warnings[kept:], self.ambiguous, self.ambiguous_parts[frame]))
+                          self.warnings[kept:], self.ambiguous, self.ambiguous_parts[frame],
+                          dims_prior))
             del self.warnings[kept:]
-        _, _, state, notes, self.ambiguous, chosen = min(found, key=lambda t: t[:2])
+        _, _, state, notes, self.ambiguous, chosen, dims_prior = min(found,
+                                                                     key=lambda t: t[:2])
+        if dims_prior is not own:
+            # the lengths' prior of the basis' start stays with its pose in the joint fit
+            self._basis_dims.append(dims_prior[0])
+            self.dims_prior = (np.mean(self._basis_dims, axis=0), DIMS_PRIOR_SIGMA)
         self.warnings += notes
         if chosen:
             self.ambiguous_parts[frame] = chosen
@@ -91,6 +115,59 @@ class _UncalibratedFit(_Fit):
         return state
 
     _start = None       # a start of _frame's search other than the body turns
+    basis = None        # PoseBasis of 3D joint sets (priors/basis.py), or None
+
+    @property
+    def _basis_dims(self):
+        if "_chosen_dims" not in self.__dict__:
+            self._chosen_dims = []
+        return self._chosen_dims
+
+    def _score(self, state, f, angles):
+        """As :meth:`_Fit._score`, plus the pose basis' density of the 3D joints (weight
+        BASIS_WEIGHT)."""
+        score = super()._score(state, f, angles)
+        if self.basis is not None and BASIS_WEIGHT > 0:
+            score = score + BASIS_WEIGHT * self.basis.cost(
+                self.kin.forward(np.atleast_2d(angles), state.dims)[0])
+        return score
+
+    def _basis_starts(self, f):
+        """Starts for a frame seen in one view from the pose basis' fits to its clicks
+        (``PoseBasis.fit_view``): the BASIS_STARTS best, each posed by inverse kinematics on
+        its joints (scaled to the template's size) with the lengths measured on them, unless
+        the lengths are kept, and the camera of the fit."""
+        if self.basis is None or BASIS_STARTS <= 0:
+            return []
+        kin = self.kin
+        v = int(np.flatnonzero(self.usable[f])[0])
+        uv = np.where((self.weights[f, v] > 0)[:, None], self.obs[f, v], np.nan)
+        angles0 = kin.start_angles()
+        size = self.sizes[v]
+        centre = np.array([(size[0] - 1) / 2, (size[1] - 1) / 2])
+        starts = []
+        for fit in self.basis.fit_view(uv, noise_px=CLICK_SIGMA_PX)[:BASIS_STARTS]:
+            Y0 = kin.forward(angles0[None], self.dims0)[0][0]
+            unit = body_size(Y0[None])
+            X = fit["joints"] * unit
+            dims = self.dims0.copy()
+            if self.fit_dims:
+                measured = dims_from_joints(X)
+                dims = np.array([measured.get(n, d) for n, d in zip(LENGTH_DIMS, dims)])
+                dims = np.clip(dims, DIMS_RANGE[0] * self.dims0, DIMS_RANGE[1] * self.dims0)
+                Y0 = kin.forward(angles0[None], dims)[0][0]
+            R, t, _ = similarity_from_points(Y0[_TORSO], X[_TORSO], with_scale=False)
+            root, angles, _ = _fit_3d(kin, X, dims, se3.transform(R, t), angles0)
+            angles = _fit_limbs_3d(kin, X, dims, root, angles)
+            # uv = s_b (R_b X / unit)_xy + t_b and X ~ root (Y): the camera of the body frame
+            scale = fit["scale"] / unit
+            R_cam = fit["camera"] @ root[:3, :3]
+            shift = (fit["camera"] @ root[:3, 3])[:2] + (fit["shift"] - centre) / scale
+            cams = [None] * len(self.views)
+            cams[v] = ScaledOrthoCamera(self.views[v], size, float(scale), R=R_cam,
+                                        t=[shift[0], shift[1], 10.0], c=centre)
+            starts.append(_State(dims, 1.0, np.eye(4)[None], angles[None], [cams]))
+        return starts
     _pool = None        # _exemplars' (prior poses, their joints at the starting lengths)
 
     def start(self, f):
