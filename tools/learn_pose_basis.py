@@ -17,7 +17,6 @@ import argparse
 import sys
 from pathlib import Path
 
-
 from zoopraxis.core.commands.common import check_output
 from zoopraxis.core.errors import ZoopraxisError
 from zoopraxis.core.files import cmu
