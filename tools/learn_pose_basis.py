@@ -13,27 +13,19 @@ and scaled by the performer's size in that take (``basis.canonical_joints``,
 components (with the mirror images) are computed at load time.
 """
 
-import argparse
 import sys
-from pathlib import Path
 
+from _learning import learning_parser
 from zoopraxis.core.commands.common import check_output
 from zoopraxis.core.errors import ZoopraxisError
 from zoopraxis.core.files import cmu
 from zoopraxis.core.priors.basis import DEFAULT_POSE_BASIS, PoseBasis
 
-REPO = Path(__file__).resolve().parents[1]
-DATA = [REPO.parent / "shared" / "data" / "cmu_more", REPO.parent / "shared" / "data" / "cmu_mocap"]
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--data", type=Path, nargs="+", default=DATA)
-    parser.add_argument("--hold-out", nargs="*", default=[], metavar="SUBJECT",
-                        help="CMU subjects to leave out (02, 35, ...)")
+    parser = learning_parser(__doc__, DEFAULT_POSE_BASIS)
     parser.add_argument("--step", type=int, default=8, help="use every STEP-th frame at 30 fps")
-    parser.add_argument("--out", type=Path, default=DEFAULT_POSE_BASIS)
-    parser.add_argument("--force", action="store_true", help="replace an existing output")
     args = parser.parse_args(argv)
     try:
         out = check_output(args.out, args.force)

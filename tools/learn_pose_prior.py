@@ -22,27 +22,19 @@ uncalibrated view cannot see (Bregler & Malik §2.6) and, summarised as a Gaussi
 body part when it is loaded, as the angle prior of the least-squares fit of such a frame.
 """
 
-import argparse
 import sys
-from pathlib import Path
 
+from _learning import learning_parser
 from zoopraxis import cli
 from zoopraxis.core.files import cmu
 from zoopraxis.core.errors import ZoopraxisError
 from zoopraxis.core.priors.pose import DEFAULT_POSE_PRIOR
 
-REPO = Path(__file__).resolve().parents[1]
-DATA = [REPO.parent / "shared" / "data" / "cmu_more", REPO.parent / "shared" / "data" / "cmu_mocap"]
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--data", type=Path, nargs="+", default=DATA)
-    parser.add_argument("--hold-out", nargs="*", default=[], metavar="SUBJECT",
-                        help="CMU subjects to leave out (02, 35, ...)")
+    parser = learning_parser(__doc__, DEFAULT_POSE_PRIOR)
     parser.add_argument("--step", type=int, default=8, help="use every STEP-th frame at 30 fps")
-    parser.add_argument("--out", type=Path, default=DEFAULT_POSE_PRIOR)
-    parser.add_argument("--force", action="store_true", help="replace an existing output")
     args = parser.parse_args(argv)
     try:
         paths = cmu.capture_paths(*args.data, hold_out=args.hold_out)

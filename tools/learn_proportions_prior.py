@@ -12,30 +12,22 @@ altogether (the shipped file has them all; ``ProportionsPrior.load(exclude=...)`
 same at load time, which is how the benchmarks judge it on performers it has not seen).
 """
 
-import argparse
 import sys
-from pathlib import Path
 
 import numpy as np
 
+from _learning import learning_parser
 from zoopraxis.core.files import cmu
 from zoopraxis.core.body.body import LENGTH_DIMS
 from zoopraxis.core.commands.common import check_output
 from zoopraxis.core.errors import ZoopraxisError
 from zoopraxis.core.priors.proportions import DEFAULT_PROPORTIONS_PRIOR, ProportionsPrior
 
-REPO = Path(__file__).resolve().parents[1]
-DATA = [REPO.parent / "shared" / "data" / "cmu_more", REPO.parent / "shared" / "data" / "cmu_mocap"]
 FPS = 3.0       # frames a second measured: lengths are the same in every frame
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--data", type=Path, nargs="+", default=DATA)
-    parser.add_argument("--hold-out", nargs="*", default=[], metavar="SUBJECT",
-                        help="CMU subjects to leave out (02, 35, ...)")
-    parser.add_argument("--out", type=Path, default=DEFAULT_PROPORTIONS_PRIOR)
-    parser.add_argument("--force", action="store_true", help="replace an existing output")
+    parser = learning_parser(__doc__, DEFAULT_PROPORTIONS_PRIOR)
     args = parser.parse_args(argv)
     try:
         out = check_output(args.out, args.force)

@@ -390,3 +390,11 @@ def subject_of(take):
     """The CMU subject of a take's name: ``"02"`` of ``"02_01"`` (the name itself if it has
     no ``_``)."""
     return str(take).split("_")[0]
+
+
+def kept_takes(takes, exclude=(), exclude_subjects=()):
+    """Mask of the take names ``takes`` (array of str) that are neither in ``exclude`` nor of
+    a subject in ``exclude_subjects`` (a prior's leave-subjects-out at load time)."""
+    takes = np.asarray(takes)
+    subjects = np.array([subject_of(t) for t in takes])
+    return ~np.isin(takes, list(exclude)) & ~np.isin(subjects, [str(s) for s in exclude_subjects])

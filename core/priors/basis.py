@@ -130,11 +130,9 @@ class PoseBasis:
                 len(joints) != len(takes) or not np.all(np.isfinite(joints)):
             raise ZoopraxisError(f"{path}: not a pose basis file (joints of shape "
                                  f"{joints.shape} for {len(takes)} takes)")
-        from ..files.cmu import subject_of
+        from ..files.cmu import kept_takes
 
-        subjects = np.array([subject_of(t) for t in takes])
-        keep = ~np.isin(takes, list(exclude)) & ~np.isin(subjects, [str(s) for s in
-                                                                     exclude_subjects])
+        keep = kept_takes(takes, exclude, exclude_subjects)
         if not keep.any():
             raise ZoopraxisError(f"{path}: no joint sets left after leaving out "
                                  f"{', '.join([*exclude, *map(str, exclude_subjects)])}")

@@ -121,11 +121,9 @@ class PosePrior:
         if not (np.issubdtype(angles.dtype, np.number) and np.all(np.isfinite(angles))):
             raise ZoopraxisError(f"{path}: not a pose prior file (angles are not finite "
                                  "numbers)")
-        from ..files.cmu import subject_of
+        from ..files.cmu import kept_takes
 
-        subjects = np.array([subject_of(t) for t in takes])
-        keep = ~np.isin(takes, list(exclude)) & ~np.isin(subjects, [str(s) for s in
-                                                                     exclude_subjects])
+        keep = kept_takes(takes, exclude, exclude_subjects)
         if not keep.any():
             raise ZoopraxisError(f"{path}: no poses left after leaving out "
                                  f"{', '.join([*exclude, *map(str, exclude_subjects)])}")
