@@ -36,7 +36,7 @@ from ..body.body import Pose
 from ..body.collision import body_proxies, penalty_system
 from .frames import thread_pool
 from .image_motion import (Accumulated, Stack, Term, accumulate, accumulate_stacked, assemble,
-                           support_weights)
+                           shown_in_render, support_weights)
 from .limb_refit import LimbRefit
 from .recover import LimbSearch
 from ..imaging.render import render, surface_points
@@ -468,15 +468,7 @@ class DifferentialTracker(LimbRefit):
                 and hit[3] == pose:
             return hit[4].copy()
         X = se3.apply(self._seg2world(state, c)[term.segment], term.ref_points)
-        uv = cam.project(X)
-        scale = 2 ** level
-        u = np.rint(uv[:, 0] * scale).astype(int)
-        v = np.rint(uv[:, 1] * scale).astype(int)
-        h, w = renders[c].label.shape
-        ok = (u >= 0) & (u < w) & (v >= 0) & (v < h)
-        lab = np.full(len(u), -1)
-        lab[ok] = renders[c].label[v[ok], u[ok]]
-        visible = ok & (lab == term.segment)
+        visible = shown_in_render(term.segment, cam.project(X), renders[c].label, level)
         if len(seen) > 64:
             seen.clear()
         seen[key] = (term, renders[c], cam, pose, visible.copy())

@@ -185,6 +185,20 @@ def sample_fast(stack, uv):
     return out.reshape(-1, C)[:n], inside
 
 
+def shown_in_render(segment, uv, label, level):
+    """Which points the render shows: those whose pixel ``uv`` (at pyramid ``level``, the
+    render ``label`` at level 0) is labelled with their own ``segment`` (inside the image, in
+    front of every other segment)."""
+    scale = 2 ** level
+    u = np.rint(uv[:, 0] * scale).astype(int)
+    v = np.rint(uv[:, 1] * scale).astype(int)
+    h, w = label.shape
+    ok = (u >= 0) & (u < w) & (v >= 0) & (v < h)
+    lab = np.full(len(u), -1)
+    lab[ok] = label[v[ok], u[ok]]
+    return ok & (lab == segment)
+
+
 def geman_mcclure(r2, s2, rho_out=None, weight_out=None):
     """The Geman-McClure estimator ``rho = r^2 / (r^2 + s^2)`` and its IRLS weights
     ``(s^2 / (r^2 + s^2))^2`` from squared residuals ``r2`` and squared scales ``s2``

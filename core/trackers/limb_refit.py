@@ -15,6 +15,7 @@ worse than at the pose the search started from (an arm: hardly worse, ``APPEARAN
 import numpy as np
 
 from ..geometry import se3
+from .image_motion import shown_in_render
 from .recover import unexplained_foreground, unexplained_share
 
 # Fewer visible points of a limb than this, at either pose, leave its appearance unjudged.
@@ -65,14 +66,7 @@ class LimbRefit:
             seg = at.segment[sel]
             X = se3.apply(self._seg2world(state, c)[seg], at.ref_points[sel])
             uv = self._camera_at(state.cameras[c], level).project(X)
-            label = renders[c].label
-            h, w = label.shape
-            scale = 2 ** level
-            u = np.rint(uv[:, 0] * scale).astype(np.intp)
-            v = np.rint(uv[:, 1] * scale).astype(np.intp)
-            inside = (u >= 0) & (u < w) & (v >= 0) & (v < h)
-            visible = np.zeros(len(seg), bool)
-            visible[inside] = label[v[inside], u[inside]] == seg[inside]
+            visible = shown_in_render(seg, uv, renders[c].label, level)
             if not visible.any():
                 continue
             # the grey anchor and, on colour plates, its chromaticity
