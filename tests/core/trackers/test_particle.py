@@ -95,6 +95,11 @@ def test_filter_refuses_bad_input(arm):
         particle.ParticleFilter(body, cameras, prior, n_particles=0)
     with pytest.raises(ZoopraxisError, match="appearance must be one of"):
         particle.ParticleFilter(body, cameras, prior, appearance="template")
+    # a pose weight needs a prior with a pose density (smooth motion has none)
+    with pytest.raises(ZoopraxisError, match="pose weight needs a prior with pose_log_prior"):
+        particle.ParticleFilter(body, cameras, prior, pose_weight=1.0)
+    with pytest.raises(ZoopraxisError, match="pose_weight must be >= 0"):
+        particle.ParticleFilter(body, cameras, prior, pose_weight=-1.0)
     pf = particle.ParticleFilter(body, cameras, prior, n_particles=10)
     with pytest.raises(ZoopraxisError, match=r"call start\(\) with the first frame first"):
         pf.step(images[1])
@@ -244,12 +249,3 @@ def test_tempering_leaves_a_pose_prior_untempered(rng):
     w, b = particle.tempered_weights(np.zeros(2000), 0.1, prior)
     assert b == 1.0
     np.testing.assert_allclose(w, np.exp(prior) / np.exp(prior).sum(), rtol=1e-9)
-
-
-def test_pose_weight_needs_a_pose_density(arm):
-    body, cameras, _, _, _ = arm
-    prior = motion_prior.SmoothMotionPrior(body, active=ARM)
-    with pytest.raises(ZoopraxisError, match="pose weight needs a prior with pose_log_prior"):
-        particle.ParticleFilter(body, cameras, prior, pose_weight=1.0)
-    with pytest.raises(ZoopraxisError, match="pose_weight must be >= 0"):
-        particle.ParticleFilter(body, cameras, prior, pose_weight=-1.0)
