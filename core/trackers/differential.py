@@ -37,6 +37,7 @@ from ..body.collision import body_proxies, penalty_system
 from .frames import thread_pool
 from .image_motion import (Accumulated, Stack, Term, accumulate, accumulate_stacked, assemble,
                            shown_in_render, support_weights)
+from .anchor import Anchor
 from .limb_refit import LimbRefit
 from .recover import LimbSearch
 from ..imaging.render import render, surface_points
@@ -58,6 +59,8 @@ class Settings:
     chroma_weight: float = 0.5        # the anchor's chromaticity (colour plates), relative to
                                       # the grey anchor at their robust scales
     chroma_scale: float = 0.02        # robust scale of chromaticity residuals
+    relight: bool = True              # the anchor under the light of the frame before
+                                      # (light.py)
     silhouette_weight: float = 0.002  # signed-distance term (per pixel^2, relative to grey^2)
     silhouette_scale: float = 3.0     # robust scale of silhouette residuals, pixels
     silhouette_margin: float = 1.0    # contour may stray this far outside the silhouette, px
@@ -157,7 +160,7 @@ def _median(x):
     return (s[h - 1] + s[h]) / 2.0
 
 
-class DifferentialTracker(LimbRefit):
+class DifferentialTracker(Anchor, LimbRefit):
     """Gauss-Newton tracker over a body model and a set of views.
 
     Parameters
@@ -177,6 +180,7 @@ class DifferentialTracker(LimbRefit):
         self.proxies = body_proxies(body)
         self.anchor_terms = None
         self.chroma_terms = None
+        self.light = None
         self.search = LimbSearch(body)
         # caches of derived values, read-only once made (see the methods that fill them)
         self._scaled = {}
@@ -403,32 +407,6 @@ class DifferentialTracker(LimbRefit):
             out.append(sub)
         return out
 
-    def set_anchor(self, state, images, renders):
-        """Keep the appearance of an anchor frame as a persistent template (per view).
-
-        Stored per level as terms whose targets are the anchor's grey levels; they are checked
-        against occlusion at every frame.
-        """
-        self.anchor_terms = self.template_terms(state, images, renders)
-        for per_view in self.anchor_terms:
-            for t in per_view or []:
-                t.name = "anchor"
-        # and its chromaticity at the same points, where the plates are in colour
-        self.chroma_terms = None
-        if self.settings.chroma_weight > 0 and all(im.chroma is not None for im in images):
-            self.chroma_terms = [None if per_view is None else
-                                 [self._chroma_anchor(t, images[t.view].chroma, level)
-                                  for t in per_view]
-                                 for level, per_view in enumerate(self.anchor_terms)]
-
-    def _chroma_anchor(self, term, chroma, level):
-        """Terms of the anchor's chromaticity channels at the points of its grey term."""
-        u = term.uv[:, 0].astype(np.intp)
-        v = term.uv[:, 1].astype(np.intp)
-        return [Term(term.view, term.segment, term.ref_points, ch[level][v, u, 0].astype(float),
-                     term.weight, self.settings.chroma_scale, f"chroma{k}",
-                     np.full((len(term), 2), np.nan)) for k, ch in enumerate(chroma)]
-
     @staticmethod
     def _image_of(images, key, level):
         """The image (with gradients) that terms named ``key`` sample."""
@@ -613,6 +591,7 @@ class DifferentialTracker(LimbRefit):
         if renders_t is None:
             renders_t = self.render_views(state_t)
         flow = self.template_terms(state_t, images_t, renders_t)
+        self.light = self._relight(state_t, renders_t, images_t)
         state, report = self._step(state_t, images_t, images_t1, previous, renders_t, start, flow)
         if self.search is None:
             return state, report
@@ -740,13 +719,16 @@ class DifferentialTracker(LimbRefit):
                 at = self.anchor_terms[level][c]
                 seen = self._visible(at, state_t, level, renders_t)
                 at = at.subset(seen)
-                parts.append(Term(c, at.segment, at.ref_points, at.target,
+                gray, lit = self.anchor_targets(c, level, seen)
+                parts.append(Term(c, at.segment, at.ref_points, gray,
                                   at.weight * s.anchor_weight, at.scale, "anchor",
                                   np.full((len(at), 2), np.nan)))
                 if self.chroma_terms is not None and images_t1[c].chroma is not None:
                     weight = s.chroma_weight * (s.flow_scale / s.chroma_scale) ** 2
                     chroma = [(t.name, t.subset(seen), weight)
                               for t in self.chroma_terms[level][c]]
+                    for (_, t, _), target in zip(chroma, lit):
+                        t.target = target
             terms = [("flow", Term.concat(parts, "flow"), 1.0)] + chroma
             if sil is not None and images_t1[c].sdf is not None and s.silhouette_weight > 0:
                 # distances shrink with the pyramid level: keep pixel units per level

@@ -69,16 +69,18 @@ class LimbRefit:
             visible = shown_in_render(seg, uv, renders[c].label, level)
             if not visible.any():
                 continue
-            # the grey anchor and, on colour plates, its chromaticity
-            channels = [(at, images[c].gray[level])]
-            if self.chroma_terms is not None and images[c].chroma is not None:
-                channels += [(t, ch[level][..., 0]) for t, ch in
-                             zip(self.chroma_terms[level][c], images[c].chroma)]
+            # the grey anchor and, on colour plates, its chromaticity, under the light the
+            # step follows (``anchor_targets``)
+            gray, chroma = self.anchor_targets(c, level, np.flatnonzero(sel)[visible])
+            channels = [(gray, images[c].gray[level], at.scale)]
+            if chroma is not None and images[c].chroma is not None:
+                channels += [(target, ch[level][..., 0], t.scale) for target, ch, t in
+                             zip(chroma, images[c].chroma, self.chroma_terms[level][c])]
             image = channels[0][1]
             gu = np.clip(np.rint(uv[visible, 0]).astype(np.intp), 0, image.shape[1] - 1)
             gv = np.clip(np.rint(uv[visible, 1]).astype(np.intp), 0, image.shape[0] - 1)
-            for term, image in channels:
-                r = (image[gv, gu] - term.target[sel][visible]) / term.scale
+            for target, image, scale in channels:
+                r = (image[gv, gu] - target) / scale
                 r *= r
                 total += float(np.sum(r / (1.0 + r))) / len(channels)
             n += int(visible.sum())

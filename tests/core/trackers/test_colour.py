@@ -84,3 +84,46 @@ def test_the_anchors_colour_tells_an_arm_from_a_shirt_of_its_grey(monkeypatch, c
     else:
         assert looks[1][0] < looks[0][0] + 0.05
         assert err > 40
+
+
+@pytest.mark.parametrize("relight", [True, False])
+def test_the_anchor_follows_the_light_on_the_body(monkeypatch, relight):
+    """The performer walks from sunlight into shade after the anchor frame: the body is
+    darker and bluer. The step measures the light's change on the whole body at the frame
+    before (the grey levels' gain, the chromaticity's shift) and compares the anchor with the
+    frame under it, so its colour still brings a wrongly moved arm back. Compared as it was,
+    every point of the anchor is off by the light's change, the colour terms fall silent
+    and the arm stays wrong."""
+    body = make_body("full")
+    p0 = body.rest_pose(se3.transform(p=[0, 0, 0.95]))
+    for name, value in (("l_shoulder_flex", 0.3), ("l_elbow_flex", 1.6), ("l_shoulder_rot", 1.0)):
+        p0.angles[body.dof_index(name)] = value
+    wrong = p0.copy()
+    wrong.angles[body.dof_index("l_shoulder_rot")] = 0.7
+    cams = sorted(ring_of_cameras(8, 3.5, 1.3, [0, 0, 0.9], (320, 240), 350),
+                  key=lambda c: (c.R.T @ -c.t)[1])[:2]
+    settings = D.Settings(limb_search=False, relight=relight)
+    (frame,) = _arm_over_the_shirt(monkeypatch, body, [p0], cams)
+
+    def prepared(images):
+        return [prepare_images(plates.to_gray_float(image), settings.levels,
+                               settings.smooth_sigma, label >= 0, colour=image)
+                for image, (_, label) in zip(images, frame)]
+
+    sun = prepared([image for image, _ in frame])
+    # shade: 60 % of the light, bluer (BGR gains)
+    shade = prepared([np.rint(image * np.float32([0.8, 0.6, 0.45])).astype(np.uint8)
+                      for image, _ in frame])
+    tracker = D.DifferentialTracker(body, True, settings)
+    right = D.State(np.stack([p0.root] * 2), p0.angles.copy(), list(cams))
+    moved = D.State(np.stack([p0.root] * 2), wrong.angles.copy(), list(cams))
+    tracker.set_anchor(right, sun, tracker.render_views(right))
+    state, _ = tracker.step(moved, shade, shade)
+    err = 1000 * np.linalg.norm(body.joints(state.pose()) - body.joints(p0), axis=1).max()
+    if relight:
+        # the light's gains, blue, green, red, measured on the body
+        assert np.allclose(tracker.light[0], [0.8, 0.6, 0.45], atol=0.05)
+        assert err < 25
+    else:
+        assert tracker.light is None
+        assert err > 40
