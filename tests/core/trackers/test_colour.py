@@ -10,6 +10,7 @@ from zoopraxis.core.imaging import plates
 from zoopraxis.core.synthetic import synth
 from zoopraxis.core.trackers import differential as D
 from zoopraxis.core.trackers.frames import chromaticity, prepare_images
+from zoopraxis.core.trackers.light import measure, relit
 
 # Two flat materials of one luma (0.299 R + 0.587 G + 0.114 B = 0.33), BGR: a blue shirt and
 # skin-coloured arms.
@@ -90,10 +91,10 @@ def test_the_anchors_colour_tells_an_arm_from_a_shirt_of_its_grey(monkeypatch, c
 def test_the_anchor_follows_the_light_on_the_body(monkeypatch, relight):
     """The performer walks from sunlight into shade after the anchor frame: the body is
     darker and bluer. The step measures the light's change on the whole body at the frame
-    before (the grey levels' gain, the chromaticity's shift) and compares the anchor with the
-    frame under it, so its colour still brings a wrongly moved arm back. Compared as it was,
-    every point of the anchor is off by the light's change, the colour terms fall silent
-    and the arm stays wrong."""
+    before (the grey levels' gain, the chromaticity's shift beyond the darkening's) and
+    compares the anchor with the frame under it, so its colour still brings a wrongly moved
+    arm back. Compared as it was, every point of the anchor is off by the light's change and
+    the arm is pulled further off."""
     body = make_body("full")
     p0 = body.rest_pose(se3.transform(p=[0, 0, 0.95]))
     for name, value in (("l_shoulder_flex", 0.3), ("l_elbow_flex", 1.6), ("l_shoulder_rot", 1.0)):
@@ -121,9 +122,32 @@ def test_the_anchor_follows_the_light_on_the_body(monkeypatch, relight):
     state, _ = tracker.step(moved, shade, shade)
     err = 1000 * np.linalg.norm(body.joints(state.pose()) - body.joints(p0), axis=1).max()
     if relight:
-        # the light's gains, blue, green, red, measured on the body
-        assert np.allclose(tracker.light[0], [0.8, 0.6, 0.45], atol=0.05)
+        # measured on the body: 60 % of the light, and a chromaticity less red than the
+        # darkening alone makes it
+        gain, red, _ = tracker.light[0]
+        assert 0.55 < gain < 0.65 and red < -0.03
         assert err < 25
     else:
         assert tracker.light is None
         assert err > 40
+
+
+def test_the_light_measured_on_the_body_predicts_the_anchor_under_it(rng):
+    """A darker light changes the chromaticity too (its offset for dark pixels weighs more):
+    the gain alone predicts that exactly; a tint is the median shift beyond it."""
+    colour = rng.uniform(0.05, 0.9, (1, 400, 3)).astype(np.float32)
+
+    def values(c):
+        return plates.to_gray_float(c)[0], [ch[0] for ch in chromaticity(c)]
+
+    anchor = values(colour)
+    for gains, tinted in (((0.5, 0.5, 0.5), False), ((0.55, 0.5, 0.45), True)):
+        now = values(colour * np.float32(gains))
+        light = measure(*anchor, *now)
+        gray, chroma = relit(*anchor, light)
+        assert np.allclose(gray, now[0], rtol=0.1)
+        worst = max(np.abs(c - n).max() for c, n in zip(chroma, now[1]))
+        assert worst < (0.02 if tinted else 1e-4)
+        # as it was, the anchor's chromaticity is further off than the robust scale
+        assert max(np.abs(c - n).max() for c, n in zip(anchor[1], now[1])) > 0.04
+    assert measure(anchor[0][:10], None, anchor[0][:10], None) is None     # too few points
