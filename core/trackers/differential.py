@@ -59,6 +59,8 @@ class Settings:
     chroma_weight: float = 0.5        # the anchor's chromaticity (colour plates), relative to
                                       # the grey anchor at their robust scales
     chroma_scale: float = 0.02        # robust scale of chromaticity residuals
+    whole_turn: bool = True           # a second start keeping the pelvis's whole turn
+                                      # (limb_refit.py)
     relight: bool = True              # the anchor under the light of the frame before
                                       # (light.py)
     silhouette_weight: float = 0.002  # signed-distance term (per pixel^2, relative to grey^2)
@@ -593,6 +595,9 @@ class DifferentialTracker(Anchor, LimbRefit):
         flow = self.template_terms(state_t, images_t, renders_t)
         self.light = self._relight(state_t, renders_t, images_t)
         state, report = self._step(state_t, images_t, images_t1, previous, renders_t, start, flow)
+        if start is None and self.settings.whole_turn:
+            state, report = self._whole_turn(state, report, state_t, images_t, images_t1,
+                                             previous, renders_t, flow)
         if self.search is None:
             return state, report
         return self._search_limbs(state, report, state_t, images_t, images_t1, previous,
