@@ -527,7 +527,6 @@ def test_a_turn_on_the_spot_is_followed_as_well_far_from_the_world_origin(body):
     assert far > 0.08, far
 
 
-
 def test_a_fast_turn_is_stepped_again_from_a_start_that_keeps_all_of_it(body, monkeypatch):
     """A body turning on the spot, arms out, as a dancer in a pirouette (0.25 rad a frame),
     then a walker's slow turn (0.03 rad a frame). The damped prediction keeps half of the last
