@@ -161,6 +161,7 @@ class VIEW3D_PT_zoopraxis(bpy.types.Panel):
         box.prop(settings, "pose_prior_path")
         box.prop(settings, "dims_path")
         if not any(view.camera for view in settings.views):       # uncalibrated
+            box.prop(settings, "use_pose_basis")
             box.prop(settings, "near_cameras")
         sub = box.row()
         sub.enabled = missing["initialize"] is None and not settings.running

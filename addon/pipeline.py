@@ -148,7 +148,8 @@ def gather(context, *, need_markers=True):
     anchor_frames = {a.frame for a in anchors}
     flips = {f: p for f, p in parse_flips(settings.depth_flips).items() if f in anchor_frames}
     options = InitOptions(template=template, flips=flips or None,
-                          pose_prior=pose_prior or "default", dims=dims,
+                          pose_prior=pose_prior or "default",
+                          pose_basis="default" if settings.use_pose_basis else None, dims=dims,
                           camera_tilt=(float(settings.camera_tilt), CAMERA_TILT_DEG[1]),
                           perspective=cameras is None and settings.near_cameras)
     return Take(plates, paths, offsets, anchors, cameras, frames, settings.tracker.lower(), n,
@@ -191,8 +192,8 @@ def initialize(take, *, progress=None, cancel=None):
 
 def _fingerprint(take):
     """What an initialization depends on: template, calibration, the anchors' clicks and the
-    animator's choices for one-view anchors (flips, camera tilt, pose prior file), near
-    uncalibrated views and the body lengths kept from a file."""
+    animator's choices for one-view anchors (flips, camera tilt, pose prior file, pose basis),
+    near uncalibrated views and the body lengths kept from a file."""
     clicks = tuple((a.frame, v, j, round(u, 2), round(w, 2))
                    for a in take.anchors if a.frame in take.frames
                    for v, joints in sorted(a.views.items())
@@ -209,7 +210,9 @@ def _fingerprint(take):
         except OSError:
             prior = (options.pose_prior, None)
     dims = None if not options.dims else tuple(sorted(options.dims.items()))
-    return options.template, cameras, clicks, flips, tilt, prior, dims, options.perspective
+    basis = options.pose_basis is not None and take.cameras is None
+    return options.template, cameras, clicks, flips, tilt, prior, dims, options.perspective, \
+        basis
 
 
 def remember_initial(scene, init, take):

@@ -125,6 +125,12 @@ class ZOOPRAXIS_PG_settings(bpy.types.PropertyGroup):
                     "pose prior: empty for the shipped one, or a prior file learned from "
                     "takes of the motion at hand ('zoopraxis prior'). Used by Initialize and "
                     "Track")
+    use_pose_basis: BoolProperty(
+        name="Pose Basis", default=False,
+        description="Uncalibrated, at anchor frames clicked in one view: also search from a "
+                    "basis of captured 3D poses fitted to the clicks and let it choose the "
+                    "pose. Better for performers whose poses are like captured ones, worse "
+                    "for others. Used by Initialize and Track")
     dims_path: StringProperty(
         name="Body Lengths From", subtype='FILE_PATH',
         description="Keep the body lengths of the same performer fitted before: an init.json "

@@ -96,16 +96,26 @@ def add_perspective_argument(parser):
 
 
 def check_uncalibrated_options(args, calibrated):
-    """Refuse ``--camera-tilt`` and ``--perspective`` with a calibration, which gives both."""
+    """Refuse ``--camera-tilt`` and ``--perspective`` with a calibration, which gives both, and
+    ``--pose-basis`` with a calibration or without a pose prior (it works beside one, in
+    uncalibrated views)."""
     for flag, given, what in (("--camera-tilt", args.camera_tilt is not None, "tilt"),
                               ("--perspective", args.perspective, "perspective")):
         if given and calibrated:
             raise ZoopraxisError(f"{flag} is for uncalibrated views: the calibration gives "
                                  f"the cameras' {what}")
+    if getattr(args, "pose_basis", False):
+        if calibrated:
+            raise ZoopraxisError("--pose-basis is for uncalibrated views: with a calibration "
+                                 "the pose prior alone chooses a one-view frame's depths")
+        if getattr(args, "no_pose_prior", False):
+            raise ZoopraxisError("--pose-basis works beside the pose prior: drop "
+                                 "--no-pose-prior")
 
 
 def add_pose_prior_arguments(parser):
-    """``--pose-prior FILE`` and ``--no-pose-prior`` for frames clicked in one view."""
+    """``--pose-prior FILE``, ``--no-pose-prior`` and ``--pose-basis`` for frames clicked in
+    one view."""
     parser.add_argument("--pose-prior", default=None, metavar="FILE",
                         help="at an anchor frame clicked in one view, choose the limbs' depth "
                              "with this pose prior (from 'zoopraxis prior': takes of the kind "
@@ -113,6 +123,11 @@ def add_pose_prior_arguments(parser):
     parser.add_argument("--no-pose-prior", action="store_true",
                         help="at an anchor frame clicked in one view, choose the limbs' depth "
                              "without a pose prior learned from motion capture")
+    parser.add_argument("--pose-basis", action="store_true",
+                        help="uncalibrated, at an anchor frame clicked in one view: also "
+                             "search from the shipped basis of captured 3D poses and let it "
+                             "choose the pose (better for performers whose poses are like "
+                             "captured ones, worse for others)")
 
 
 def parse_pose_prior(args, template):
@@ -166,7 +181,7 @@ def parse_camera_tilt(text):
 def parse_init_options(args, calibrated, fit_dims=True):
     """The :class:`InitOptions` of the command line's initialization options (``--template``,
     ``--flip``, ``--camera-tilt``, ``--perspective``, ``--pose-prior`` / ``--no-pose-prior``,
-    ``--dims-from``), each checked.
+    ``--pose-basis``, ``--dims-from``), each checked.
 
     Raises
     ------
@@ -181,7 +196,8 @@ def parse_init_options(args, calibrated, fit_dims=True):
     check_uncalibrated_options(args, calibrated)
     pose_prior = parse_pose_prior(args, args.template)
     dims = read_dims(args.dims_from, args.template) if args.dims_from else None
-    return InitOptions(template=args.template, flips=flips, pose_prior=pose_prior, dims=dims,
+    return InitOptions(template=args.template, flips=flips, pose_prior=pose_prior,
+                       pose_basis="default" if args.pose_basis else None, dims=dims,
                        fit_dims=fit_dims, camera_tilt=camera_tilt,
                        perspective=args.perspective)
 

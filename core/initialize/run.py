@@ -176,13 +176,16 @@ def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None,
         joint sets (``priors/basis.py``, ``tools/learn_pose_basis.py``) fitted to the clicks
         gives more starts (with the lengths measured on them, their prior centred there) and
         its density of the 3D joints joins the pose prior in choosing the limbs' depth signs
-        and the search. ``"default"``: the shipped one. Not the default (None): on held-out
-        CMU performers in one view it takes the error from 64.2 mm to 45.0 (36 frames,
-        Procrustes-aligned; performers and basis held out alike), but random everyday poses
-        of the body model, unlike the captures', from 39.9 to 59.6 (30 poses,
-        ``bench_initialize.py --only limits``); a broad Gaussian of the body's everyday poses
-        mixed into its density kept them better (6 of them: 61.5 against 43.5 without the
-        basis) but lost the held-out gain (12 frames: 61.5 against 38.7 and 55.7 without).
+        and the search. ``"default"``: the shipped one. Opt-in, not the default (None;
+        ``--pose-basis`` on the command line, ``InitOptions.pose_basis``, the add-on's *Pose
+        Basis*): on held-out CMU performers in one view it takes the error from 64.2 mm to
+        45.0 (36 frames, Procrustes-aligned; performers and basis held out alike), but random
+        everyday poses of the body model, unlike the captures', from 39.9 to 59.6 (30 poses,
+        ``bench_initialize.py --only limits``), so it is for performers whose poses are like
+        captured ones. A broad Gaussian of the body's everyday poses mixed into its density
+        kept them better (6 of them: 61.5 against 43.5 without the basis) but lost the
+        held-out gain (12 frames: 61.5 against 38.7 and 55.7 without); taking the basis' pose
+        only where it is sure was a middle way, neither (benchmarks/README.md).
 
     Returns
     -------
@@ -326,7 +329,8 @@ def initialize_take(anchors, views, plates, cameras, options, log=None):
     result = initialize(anchors, sizes,
                         template=options.template, calibrated=calibrated, views=list(views),
                         flips=options.flips, camera_tilt=options.camera_tilt,
-                        pose_prior=options.pose_prior, dims=options.dims,
+                        pose_prior=options.pose_prior, pose_basis=options.pose_basis,
+                        dims=options.dims,
                         fit_dims=options.fits_dims, perspective=options.perspective)
     for note in result.flip_notes() + ([result.distance_note()] if options.perspective else []):
         log(note)

@@ -629,6 +629,27 @@ class _PanelLayout(_Layout):
         return lambda *args, **options: self
 
 
+def test_pose_basis_toggle_is_off_by_default(blender):
+    """The Initialize step's "Pose Basis", offered while no view is calibrated, is off by
+    default (no basis, as before it) and, turned on, gives Initialize and Track the shipped
+    basis."""
+    import types
+
+    from zoopraxis.addon import pipeline
+    from zoopraxis.addon.panels import VIEW3D_PT_zoopraxis
+
+    settings = load_sample(("cam0",))
+    bpy.ops.zoopraxis.import_markers(filepath=str(SAMPLE / "markers.json"))
+    log = []
+    VIEW3D_PT_zoopraxis.draw(types.SimpleNamespace(layout=_PanelLayout(log)), blender)
+    assert ("prop", "use_pose_basis") in log and not settings.use_pose_basis
+    for on, expected in ((False, None), (True, "default")):
+        settings.use_pose_basis = on
+        take = pipeline.gather(blender)
+        take.close()
+        assert take.init_options.pose_basis == expected
+
+
 @pytest.mark.slow
 def test_near_cameras_from_the_panel(blender, monkeypatch):
     """The Initialize step's "Near Cameras", offered while no view is calibrated, reaches the

@@ -9,6 +9,7 @@ from zoopraxis.core.initialize.options import CAMERA_TILT_DEG, InitOptions
 def test_defaults_and_what_fits_the_lengths():
     options = InitOptions()
     assert options.template == "full" and options.pose_prior == "default"
+    assert options.pose_basis is None
     assert options.camera_tilt == CAMERA_TILT_DEG and not options.perspective
     assert options.fits_dims
     assert not InitOptions(fit_dims=False).fits_dims
@@ -25,3 +26,28 @@ def test_bad_options_are_refused_in_one_line():
     with pytest.raises(ZoopraxisError, match="depth flip at frame 3: unknown body part 'tail'"):
         InitOptions(flips={3: ["left leg", "tail"]})
     assert InitOptions(flips={3: "the Left-Leg"}).flips == {3: "the Left-Leg"}
+
+
+def test_pose_basis_on_the_command_line(monkeypatch):
+    """``--pose-basis`` of ``init`` and ``track`` reaches ``initialize`` as the shipped pose
+    basis; without it the basis is off."""
+    from types import SimpleNamespace
+
+    from zoopraxis.core.commands import init as init_command, track as track_command
+    from zoopraxis.core.commands.common import parse_init_options
+    from zoopraxis.core.initialize import run
+
+    given = []
+    monkeypatch.setattr(run, "initialize", lambda *a, **kw: given.append(kw["pose_basis"]) or
+                        SimpleNamespace(flip_notes=list, notes=[]))
+    plates = {"cam0": SimpleNamespace(image_size=(1920, 1080))}
+    base = ["--markers", "markers.json", "--plate", "cam0=plate", "--out", "out.json"]
+    for command in (init_command, track_command):
+        for flag, expected in (([], None), (["--pose-basis"], "default")):
+            args = command.build_parser().parse_args(base + flag)
+            options = parse_init_options(args, calibrated=False)
+            run.initialize_take([], ["cam0"], plates, None, options)
+            assert options.pose_basis == given[-1] == expected
+        with pytest.raises(ZoopraxisError, match="--pose-basis works beside the pose prior"):
+            parse_init_options(command.build_parser().parse_args(
+                base + ["--pose-basis", "--no-pose-prior"]), calibrated=False)
