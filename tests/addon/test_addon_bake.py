@@ -1,12 +1,14 @@
 """Baking a take onto an armature: bone motion, BVH and FBX round trips, new actions each run."""
 
+import json
+import shutil
 import subprocess
 import sys
 
 import numpy as np
 import pytest
 
-from test_addon_support import (blender, bpy, matrix_np, registered,  # noqa: F401
+from test_addon_support import (SAMPLE, blender, bpy, matrix_np, registered,  # noqa: F401
                                 synthetic_result, write_result)
 
 from zoopraxis.addon import bake as bake_mod
@@ -228,16 +230,35 @@ def test_bake_command_writes_blend_bvh_fbx(tmp_path):
     assert missing.returncode == 2 and "no such result file" in missing.stderr
 
 
+def short_sample(folder, frames):
+    """The bundled sample cut to its first ``frames`` frames (the anchors among them kept),
+    in ``folder``."""
+    folder.mkdir()
+    for name in ("calibration.json", "truth.json"):
+        shutil.copy(SAMPLE / name, folder / name)
+    markers = json.loads((SAMPLE / "markers.json").read_text())
+    markers["anchors"] = [a for a in markers["anchors"] if a["frame"] < frames]
+    (folder / "markers.json").write_text(json.dumps(markers))
+    for view in ("cam0", "cam1", "cam2"):
+        (folder / view).mkdir()
+        for f in range(frames):
+            shutil.copy(SAMPLE / view / f"{f:06d}.jpg", folder / view / f"{f:06d}.jpg")
+    return folder
+
+
 @pytest.mark.slow
 def test_demo_inside_blender_bakes_through_the_command_table(blender, tmp_path, capsys):
     """With bpy loaded (``blender --command zoopraxis demo``), the demo bakes in this process
-    through the root command table (core never imports the add-on) and writes every output."""
+    through the root command table (core never imports the add-on) and writes every output.
+    On the sample's first 12 frames (tracked from the anchor at frame 0): MPJPE 18.1 mm (15.7
+    over the whole sample, which takes four times as long)."""
     import re
 
     from zoopraxis import cli
 
     out = tmp_path / "demo"
-    assert cli.main(["demo", "--out", str(out)]) == 0
+    sample = short_sample(tmp_path / "sample", 12)
+    assert cli.main(["demo", "--sample", str(sample), "--out", str(out)]) == 0
     for name in ("result.json", "take.blend", "take.bvh", "take.fbx", "contact_sheet.png"):
         assert (out / name).stat().st_size > 0, name
     said = capsys.readouterr().out

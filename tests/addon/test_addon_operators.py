@@ -454,7 +454,7 @@ class _Layout:
 
 
 @pytest.mark.slow
-def test_one_view_flips_in_depth_from_the_panel(blender):
+def test_one_view_flips_in_depth_from_the_panel(blender, fits_once):
     """Initialize from one view: the panel offers each limb of the anchor frames to flip in
     depth; a flip is remembered for Initialize and Track, runs the fit again, and a second
     click undoes it."""
@@ -510,7 +510,7 @@ def test_one_view_flips_in_depth_from_the_panel(blender):
 
 
 @pytest.mark.slow
-def test_one_view_camera_tilt_from_the_panel(blender):
+def test_one_view_camera_tilt_from_the_panel(blender, fits_once):
     """The panel's "Camera Looks Down" reaches the one-view fit: the sample's level cam0 is
     fitted about level by default (within 12 degrees); said to look down 30 degrees, the
     remembered fit is stale and the new one looks at least 3 degrees further down (about 5:
@@ -549,7 +549,7 @@ def test_flip_reports_the_initialization_error(blender):
 
 
 @pytest.mark.slow
-def test_pose_prior_file_from_the_panel(blender, tmp_path):
+def test_pose_prior_file_from_the_panel(blender, tmp_path, fits_once):
     """The Initialize step's "Pose Prior" file reaches the one-view fit: with a prior learned
     from the take itself (its truth, as from an earlier track of the performer) the sample's
     cam2 alone gives a pose nearer the truth at the last anchor than the shipped prior (51 mm
@@ -593,7 +593,7 @@ def test_pose_prior_file_from_the_panel(blender, tmp_path):
 
 
 @pytest.mark.slow
-def test_body_lengths_file_from_the_panel(blender, tmp_path):
+def test_body_lengths_file_from_the_panel(blender, tmp_path, fits_once):
     """The Initialize step's "Body Lengths From" file: a one-view initialization keeps the
     lengths of a three-view init.json of the performer instead of fitting its own; the
     remembered fit goes stale when the file is set; a missing file is refused in one line."""
@@ -651,7 +651,7 @@ def test_pose_basis_toggle_is_off_by_default(blender):
 
 
 @pytest.mark.slow
-def test_near_cameras_from_the_panel(blender, monkeypatch):
+def test_near_cameras_from_the_panel(blender, monkeypatch, fits_once):
     """The Initialize step's "Near Cameras", offered while no view is calibrated, reaches the
     one-view fit and the tracker's own initialization: the sample's cam0, 4.1 m from the
     walker, gets a camera distance of that order (reported by Initialize) instead of none;

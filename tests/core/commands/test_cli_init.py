@@ -34,7 +34,7 @@ def test_init_command_writes_init_json(tmp_path, capsys):
 
 
 @pytest.mark.slow
-def test_init_command_keeps_the_dims_of_an_earlier_init(tmp_path, capsys):
+def test_init_command_keeps_the_dims_of_an_earlier_init(tmp_path, capsys, fits_once):
     """--dims-from: a one-view init keeps the lengths a three-view init of the performer
     fitted; a file without them, or of another template, is refused naming it."""
     root = cli.__file__.replace("cli.py", "samples/walk3/")
@@ -88,7 +88,7 @@ def _sample_first_anchor_in_cam0(tmp_path):
 
 
 @pytest.mark.slow
-def test_init_command_one_view_with_and_without_the_pose_prior(tmp_path, capsys):
+def test_init_command_one_view_with_and_without_the_pose_prior(tmp_path, capsys, fits_once):
     root, markers, _ = _sample_first_anchor_in_cam0(tmp_path)
     joints = {}
     for flag in ([], ["--no-pose-prior"]):
@@ -191,7 +191,7 @@ def test_init_and_track_commands_take_a_pose_prior_file(tmp_path, capsys):
 
 
 @pytest.mark.slow
-def test_init_and_track_commands_take_the_camera_tilt(tmp_path, capsys):
+def test_init_and_track_commands_take_the_camera_tilt(tmp_path, capsys, fits_once):
     """``--camera-tilt DOWN[:SPREAD]`` reaches the one-view fit (the sample's cam0 looks at the
     walker about level; told 30 degrees down, give or take 3, the fitted camera looks down
     20-35); bad values and calibrated views are refused in one line."""
@@ -222,7 +222,7 @@ def test_init_and_track_commands_take_the_camera_tilt(tmp_path, capsys):
 
 
 @pytest.mark.slow
-def test_init_command_flips_a_limb_and_says_how(tmp_path, capsys):
+def test_init_command_flips_a_limb_and_says_how(tmp_path, capsys, fits_once):
     root, markers, frame = _sample_first_anchor_in_cam0(tmp_path)
     base = ["init", "--markers", str(markers), f"--plate=cam0={root}cam0"]
     assert cli.main(base + ["--out", str(tmp_path / "a.json")]) == 0

@@ -146,11 +146,13 @@ def test_track_one_view_keeps_the_lengths_of_a_calibrated_init(take, tmp_path):
                for n in ("thigh", "shank", "upper_arm", "forearm", "torso"))
     assert any(abs(lengths[0][n] - measured[n]) > 1e-3
                for n in ("thigh", "shank", "upper_arm", "forearm", "torso"))
-    # ... and a result.json's body serves as well
+    # ... and a result.json's body serves as well (read the same way for any views: here the
+    # two calibrated ones, whose fit is quick)
     again = tmp_path / "again.json"
-    run = zoopraxis("init", "--plate", f"cam0={take / 'cam0'}", "--markers",
-                    tmp_path / "markers.json", "--dims-from", tmp_path / "result0.json",
-                    "--out", again)
+    run = zoopraxis("init", "--plate", f"cam0={take / 'cam0'}", "--plate",
+                    f"cam1={take / 'cam1'}", "--markers", take / "markers.json",
+                    "--calibration", take / "calibration.json",
+                    "--dims-from", tmp_path / "result0.json", "--out", again)
     assert run.returncode == 0, run.stderr
     assert json.loads(again.read_text())["dims"]["thigh"] == pytest.approx(lengths[0]["thigh"],
                                                                           abs=1e-5)
