@@ -10,6 +10,9 @@ like at the anchor frame says which is which: at its true place its points sampl
 and the hand they sampled then; drawn into the gap, they sample the trunk's clothes. So a moved
 limb is kept only when the anchor's appearance of its visible points fits the new frame no
 worse than at the pose the search started from (an arm: hardly worse, ``APPEARANCE_SLACK``).
+
+The same way, a frame is solved again from a second start when the body turns fast about the
+vertical (:meth:`LimbRefit._whole_turn`), and the start that explains it better is kept.
 """
 
 import numpy as np
