@@ -50,16 +50,24 @@ class Anchor:
         out = []
         for c, at in enumerate(self.anchor_terms[level]):
             seen = self._visible(at, state, level, renders)
-            X = se3.apply(self._seg2world(state, c)[at.segment[seen]], at.ref_points[seen])
-            uv = self._camera_at(state.cameras[c], level).project(X)
             gray = images[c].gray[level]
-            gu = np.clip(np.rint(uv[:, 0]).astype(np.intp), 0, gray.shape[1] - 1)
-            gv = np.clip(np.rint(uv[:, 1]).astype(np.intp), 0, gray.shape[0] - 1)
+            _, gu, gv = self.anchor_pixels(state, c, level, seen, gray.shape)
             chroma = None if self.chroma_terms is None or images[c].chroma is None else \
                 [ch[level][gv, gu, 0] for ch in images[c].chroma]
             out.append(measure(*self.anchor_targets(c, level, seen, lit=False),
                                gray[gv, gu], chroma))
         return out
+
+    def anchor_pixels(self, state, c, level, select, shape):
+        """View ``c``'s anchor points ``select`` at ``state``, projected at ``level``: their
+        image positions, and the rows and columns of their nearest pixels in an image of
+        ``shape`` (clipped to it)."""
+        at = self.anchor_terms[level][c]
+        X = se3.apply(self._seg2world(state, c)[at.segment[select]], at.ref_points[select])
+        uv = self._camera_at(state.cameras[c], level).project(X)
+        gu = np.clip(np.rint(uv[:, 0]).astype(np.intp), 0, shape[1] - 1)
+        gv = np.clip(np.rint(uv[:, 1]).astype(np.intp), 0, shape[0] - 1)
+        return uv, gu, gv
 
     def anchor_targets(self, c, level, select, lit=True):
         """View ``c``'s anchor targets at ``level`` for the points ``select``: grey levels and

@@ -77,7 +77,13 @@ def chromaticity(colour):
     b, g, r = c[..., 0], c[..., 1], c[..., 2]
     if np.array_equal(b, g) and np.array_equal(g, r):
         return None
-    k = np.float32(CHROMA_OFFSET)
+    return chroma_channels(b, g, r)
+
+
+def chroma_channels(b, g, r):
+    """:func:`chromaticity`'s two channels of the colour channels ``b, g, r`` (arrays of one
+    float type, which the result keeps)."""
+    k = r.dtype.type(CHROMA_OFFSET)
     total = b + g + r + 3 * k
     return [(r + k) / total, (g + k) / total]
 

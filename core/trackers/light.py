@@ -17,7 +17,7 @@ with the shift.
 
 import numpy as np
 
-from .frames import CHROMA_OFFSET
+from .frames import CHROMA_OFFSET, chroma_channels
 
 
 # OpenCV's luma weights, B, G, R (``plates.to_gray_float``).
@@ -45,8 +45,7 @@ def _darkened(anchor_gray, anchor_chroma, gain):
     """The anchor's chromaticity under a light ``gain`` times as bright: the same colours,
     but the chromaticity's offset for dark pixels weighs more in a darker one."""
     colour = np.clip(_colour_of(anchor_gray, anchor_chroma) * gain, 0.0, None)
-    total = colour.sum(axis=-1) + 3 * CHROMA_OFFSET
-    return [(colour[..., 2] + CHROMA_OFFSET) / total, (colour[..., 1] + CHROMA_OFFSET) / total]
+    return chroma_channels(colour[..., 0], colour[..., 1], colour[..., 2])
 
 
 def measure(anchor_gray, anchor_chroma, gray, chroma):

@@ -73,8 +73,7 @@ class LimbRefit:
             if not sel.any():
                 continue
             seg = at.segment[sel]
-            X = se3.apply(self._seg2world(state, c)[seg], at.ref_points[sel])
-            uv = self._camera_at(state.cameras[c], level).project(X)
+            uv, gu, gv = self.anchor_pixels(state, c, level, sel, images[c].gray[level].shape)
             visible = shown_in_render(seg, uv, renders[c].label, level)
             if not visible.any():
                 continue
@@ -85,9 +84,7 @@ class LimbRefit:
             if chroma is not None and images[c].chroma is not None:
                 channels += [(target, ch[level][..., 0], t.scale) for target, ch, t in
                              zip(chroma, images[c].chroma, self.chroma_terms[level][c])]
-            image = channels[0][1]
-            gu = np.clip(np.rint(uv[visible, 0]).astype(np.intp), 0, image.shape[1] - 1)
-            gv = np.clip(np.rint(uv[visible, 1]).astype(np.intp), 0, image.shape[0] - 1)
+            gu, gv = gu[visible], gv[visible]
             for target, image, scale in channels:
                 r = (image[gv, gu] - target) / scale
                 r *= r
