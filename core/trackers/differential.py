@@ -61,6 +61,7 @@ class Settings:
     chroma_scale: float = 0.02        # robust scale of chromaticity residuals
     whole_turn: bool = True           # a second start keeping the pelvis's whole turn
                                       # (limb_refit.py)
+    hands: bool = True                # the limb search draws a lost arm's hand to its colour
     relight: bool = True              # the anchor under the light of the frame before
                                       # (light.py)
     silhouette_weight: float = 0.002  # signed-distance term (per pixel^2, relative to grey^2)

@@ -11,6 +11,10 @@ and the hand they sampled then; drawn into the gap, they sample the trunk's clot
 limb is kept only when the anchor's appearance of its visible points fits the new frame no
 worse than at the pose the search started from (an arm: hardly worse, ``APPEARANCE_SLACK``).
 
+The search draws an arm whose hand has lost its colour back to it (``Settings.hands``,
+:meth:`LimbRefit.end_colours`): in front of the trunk the silhouettes say nothing of an arm,
+and a bare hand differs from the clothes more than any other part.
+
 The same way, a frame is solved again from a second start when the body turns fast about the
 vertical (:meth:`LimbRefit._whole_turn`), and the start that explains it better is kept.
 """
@@ -19,6 +23,7 @@ import numpy as np
 
 from ..geometry import se3
 from .image_motion import shown_in_render
+from .light import relit
 from .recover import unexplained_foreground, unexplained_share
 
 # Fewer visible points of a limb than this, at either pose, leave its appearance unjudged.
@@ -38,6 +43,16 @@ APPEARANCE_SLACK = {"leg": 0.0, "arm": 0.02}
 # part of the last frame's turn (``settings.velocity``, ``root_carry``); when keeping all of it
 # would turn the body this much further (degrees), the step runs from there too.
 TURN_HYPOTHESIS_DEG = 2.0
+
+# An arm's end is drawn to its colour (``recover.END_BONUS``) in the views where at least this
+# many anchor points of the hand were seen; the colour's spread is at least the chromaticity's
+# robust scale.
+END_MIN_POINTS = 8
+# ... and only if at most this share of the trunk's and legs' anchor points is within the
+# chromaticity's robust scale of the hands' colour (hands in gloves of the trousers' colour say
+# nothing). Bare arms and the face may share it: the search keeps a hand out of the other arm
+# and away from the head (:meth:`LimbRefit.end_colours`).
+END_SHARED = 0.1
 
 
 class LimbRefit:
@@ -91,6 +106,121 @@ class LimbRefit:
                 total += float(np.sum(r / (1.0 + r))) / len(channels)
             n += int(visible.sum())
         return (total / n if n else float("nan")), n
+
+    def _end_points(self, level):
+        """Per arm with an end (``search.ends``), per view, the anchor points (indices into
+        the view's anchor term at ``level``) on that end's surface where its colour is worth
+        drawing the arm to, else None.
+
+        The hands as seen at the anchor frame, on the person's foreground, in at least
+        ``END_MIN_POINTS`` points: the colour (chromaticity) that most of these views agree on
+        is the hands' (a hand the anchor pose put a little off samples the sleeve or the
+        background in some views, never one colour in all of them). A view is used for a hand
+        whose points there have that colour; where a view saw neither hand in it, the points
+        of the others stand for it (a tuple of their grey levels and chromaticities instead of
+        indices). No view is used if the trunk and legs have the colour too
+        (``END_SHARED``)."""
+        key = (id(self.anchor_terms), level)
+        if getattr(self, "_end_cache", (None,))[0] == key:
+            return self._end_cache[1]
+        prims = self.body.primitives()
+        terms, chroma = self.anchor_terms[level] or [], self.chroma_terms[level] or []
+        scale = self.settings.chroma_scale
+        names = self.body.segment_names
+        arms = np.concatenate([g.segments for g in self.search.groups
+                               if g.name in self.search.ends] + [[]]).astype(int)
+        # the trunk and legs (the head and arms may be bare skin)
+        nohead = [at.segment != names.index("head") if "head" in names else
+                  np.ones(len(at.segment), bool) for at in terms]
+        trunk_legs = [~np.isin(at.segment, arms) & k for at, k in zip(terms, nohead)]
+        points, colours, counts = {}, [], []
+        for name, p in self.search.ends.items():
+            R, c, size = prims.prim2seg[p][:3, :3], prims.prim2seg[p][:3, 3], prims.size[p]
+            per_view = []
+            for v, (at, ch) in enumerate(zip(terms, chroma)):
+                local = (at.ref_points - c) @ R / size
+                # on the hand, and seen on the person's foreground (``template_terms``' weights)
+                on = ((at.segment == prims.segment[p]) & (np.linalg.norm(local, axis=1) < 1.1)
+                      & (at.weight >= 1.0))
+                per_view.append(np.flatnonzero(on))
+                if on.sum() >= END_MIN_POINTS:
+                    colours.append([np.median(t.target[on]) for t in ch])
+                    counts.append(on.sum())
+            points[name] = per_view
+        out = {name: [None] * len(terms) for name in points}
+        if not colours:
+            return self._cache_ends(key, out)
+        colours = np.array(colours)
+        close = np.linalg.norm(colours[:, None] - colours[None], axis=2) < scale
+        best = close[np.argmax(close.sum(axis=1))]
+        hand = np.median(colours[best], axis=0)
+        shared = np.concatenate([np.linalg.norm(np.stack([t.target[r] for t in ch], axis=1)
+                                                - hand, axis=1) < scale
+                                 for ch, r in zip(chroma, trunk_legs)])
+        if (np.sum(np.array(counts)[best]) < 2 * END_MIN_POINTS
+                or (len(shared) and shared.mean() > END_SHARED)):
+            return self._cache_ends(key, out)
+        pooled = []
+        for name, per_view in points.items():
+            for v, sel in enumerate(per_view):
+                if len(sel) >= END_MIN_POINTS and np.linalg.norm(
+                        [np.median(t.target[sel]) for t in chroma[v]] - hand) < scale:
+                    out[name][v] = sel
+                    pooled.append((terms[v].target[sel], [t.target[sel] for t in chroma[v]]))
+        # where a view saw neither hand in that colour, the others' points stand for it
+        gray = np.concatenate([g for g, _ in pooled])
+        pooled = (gray, [np.concatenate([ch[k] for _, ch in pooled]) for k in range(2)])
+        for name, per_view in out.items():
+            out[name] = [pooled if sel is None else sel for sel in per_view]
+        return self._cache_ends(key, out)
+
+    def _cache_ends(self, key, ends):
+        self._end_cache = (key, ends)
+        return ends
+
+    def end_colours(self, state, images, labels, person=None):
+        """What :meth:`recover.LimbSearch.search` draws each arm's end (the hand) to: per arm,
+        per view, None or ``(channels, target, spread, elsewhere)``, the view's chromaticity
+        images at full resolution, the hand's chromaticity at the anchor frame under the light
+        measured last and its spread, and the pixels that earn nothing: off the ``person``
+        (per view, the foreground without cast shadows; a shadow on a wooden floor is often
+        of a skin's colour) and where the model's head or other arm is (bare arms and the face
+        have the hands' colour). :meth:`_end_points` says where the colour is worth it."""
+        if (self.anchor_terms is None or self.chroma_terms is None
+                or not getattr(self.search, "ends", None)):
+            return None
+        level = min(self.settings.finest, self.settings.levels - 1)
+        if self.anchor_terms[level] is None:
+            return None
+        ends = self._end_points(level)
+        names = self.body.segment_names
+        groups = {g.name: g for g in self.search.groups}
+        out = {}
+        for name, per_view in ends.items():
+            others = [int(k) for o in ends if o != name for k in groups[o].segments]
+            if "head" in names:
+                others.append(names.index("head"))
+            colours = []
+            for c, sel in enumerate(per_view):
+                im = images[c]
+                if sel is None or im.chroma is None or labels[c] is None:
+                    colours.append(None)
+                    continue
+                if isinstance(sel, tuple):
+                    gains = None if self.light is None else self.light[c]
+                    chroma = sel[1] if gains is None else relit(*sel, gains)[1]
+                else:
+                    _, chroma = self.anchor_targets(c, level, sel)
+                target = np.array([np.median(t) for t in chroma])
+                spread = max(self.settings.chroma_scale, float(np.median(
+                    [1.4826 * np.median(np.abs(t - m)) for t, m in zip(chroma, target)])))
+                # the other arm (bare arms have the hands' colour) and the head
+                elsewhere = np.isin(labels[c], others)
+                if person is not None and person[c] is not None:
+                    elsewhere |= ~person[c]
+                colours.append(([ch[0][..., 0] for ch in im.chroma], target, spread, elsewhere))
+            out[name] = colours
+        return out
 
     def _looks_like_itself(self, group, state, renders, state2, renders2, images):
         """Whether limb ``group`` at ``state2`` fits its anchor appearance no worse than at
@@ -148,7 +278,9 @@ class LimbRefit:
         # fit perspective plates only roughly): the search needs two calibrated views.
         if (self.settings.limb_search and self.calibrated
                 and sum(d is not None for d in sdfs) >= 2):
-            angles, moved = self.search.search(state, sdfs, labels, known, person)
+            colours = (self.end_colours(state, images_t1, labels, person)
+                       if self.settings.hands else None)
+            angles, moved = self.search.search(state, sdfs, labels, known, person, colours)
             unexplained = self.search.last_unexplained
             if moved:
                 refit = self._refit(state, report, angles, [name for name, _ in moved],

@@ -13,6 +13,10 @@ distance), and into foreground that the rest of the body does not already explai
 done in two rounds (wide, then narrow around the best). Everything is vectorized over draws and
 points; the whole search costs a few milliseconds a frame. When a limb's best draw clearly beats
 its current pose, the tracker refines from it (:meth:`DifferentialTracker.step` with ``start``).
+
+On colour plates an arm is also drawn by its hand's colour (``END_BONUS``), and searched when
+its hand is not on that colour (``END_SEEN``), never into the other arm: the one cue that finds
+an arm lost in front of the trunk, where the silhouettes say nothing.
 """
 
 from dataclasses import dataclass
@@ -45,6 +49,14 @@ UNEXPLAINED_MIN_PX = 5  # unexplained foreground thinner than this is the build,
 # ankle 1.4 m off for 40 frames, and the second round's backgrounds, made without the real
 # leg, took the standing leg for background and called those frames ok).
 ARM_WIDTHS_AWAY = 1.0
+# Credit for a point of an arm's end (the hand) on a foreground pixel of the hand's colour at
+# the anchor frame (full credit within the colour's spread): an arm lost in front of the trunk
+# lies inside the silhouettes, where only its look tells where it is, and a bare hand differs
+# from the clothes more than any other part does.
+END_BONUS = 0.6
+# A limb whose end finds less than this of its colour (mean credit, 0-1, over the end's points
+# in the views that know the colour) is searched whatever its silhouette says.
+END_SEEN = 0.3
 TRUNK_SEGMENTS = ("pelvis", "abdomen", "chest", "head")
 
 
@@ -86,6 +98,25 @@ def limb_groups(body):
                                         np.array(dofs), np.array(widths), np.array(seg),
                                         staged))
     return groups
+
+
+def end_primitives(body, groups, kinds=("arm",)):
+    """The primitive at the end of each limb of ``kinds`` (an arm's hand): of the limb's last
+    segment, the one farthest from its first segment's primitives. Returns group name ->
+    primitive index."""
+    prims = body.primitives()
+    centres = prims.prim2seg[:, :3, 3]
+    out = {}
+    for g in groups:
+        if g.name.split()[-1] not in kinds:
+            continue
+        first = np.flatnonzero(prims.segment == g.segments[0])
+        last = np.flatnonzero(prims.segment == g.segments[-1])
+        if len(g.segments) < 2 or not len(first) or not len(last):
+            continue
+        d = np.linalg.norm(centres[last] - centres[first].mean(axis=0), axis=1)
+        out[g.name] = int(last[np.argmax(d)])
+    return out
 
 
 def interior_points(prims, n=POINTS_PER_PRIMITIVE, shrink=SHRINK, seed=0):
@@ -215,7 +246,10 @@ class LimbSearch:
         self.seed = seed
         self.rng = np.random.default_rng(seed)
         self.groups = limb_groups(body)
-        self.point_segment, self.points = interior_points(body.primitives())
+        self.prims = prims = body.primitives()
+        self.point_segment, self.points = interior_points(prims)
+        self.point_prim = np.repeat(np.arange(len(prims)), POINTS_PER_PRIMITIVE)
+        self.ends = end_primitives(body, self.groups)
         self.trunk = np.array([k for k, n in enumerate(body.segment_names)
                                if n in TRUNK_SEGMENTS], int)
         self._blocks = {}
@@ -228,7 +262,7 @@ class LimbSearch:
         self.rng = np.random.default_rng([self.seed, *(int(k) for k in key)])
 
     def score(self, roots, angles, segments, cameras, sdfs, rest, unexplained=None,
-              plain=False):
+              plain=False, colour=None):
         """Silhouette score of a batch of poses for one limb, mean over points and views.
 
         Parameters
@@ -248,8 +282,14 @@ class LimbSearch:
             left behind has gone.
 
         plain : bool
-            Also return the score without the credit for unexplained foreground (what
-            ``unexplained=None`` gives).
+            Also return the score without the credit for unexplained foreground or colour
+            (what ``unexplained=None`` gives).
+        colour : tuple, optional
+            ``(primitive, per_view, ...)``: the points of that primitive (a hand) earn
+            ``END_BONUS`` on foreground pixels of its colour; ``per_view[c]`` is None or
+            ``(channels, target, spread, elsewhere)``: the chromaticity images (H, W) of view
+            ``c``, the colour's chromaticity and spread, and the pixels that earn nothing (the
+            other arm, the face) (:meth:`LimbRefit.end_colours`).
 
         Returns
         -------
@@ -260,10 +300,16 @@ class LimbSearch:
         key = tuple(int(k) for k in segments)
         blocks = self._blocks.get(key)
         if blocks is None:
-            # the limb's points, segment by segment: (position in segments, points)
-            blocks = self._blocks[key] = [(i, self.points[self.point_segment == k])
+            # the limb's points, segment by segment: (position in segments, points, their
+            # primitives)
+            blocks = self._blocks[key] = [(i, self.points[self.point_segment == k],
+                                           self.point_prim[self.point_segment == k])
                                           for i, k in enumerate(key)]
-        m = sum(len(pts) for _, pts in blocks)
+        m = sum(len(pts) for _, pts, _ in blocks)
+        end = None
+        if colour is not None and any(x is not None for x in colour[1]):
+            end = np.concatenate([p == colour[0] for _, _, p in blocks])
+            end = end if end.any() else None
         n = len(angles)
         total = np.zeros(n)
         total_plain = np.zeros(n) if plain else None
@@ -277,7 +323,7 @@ class LimbSearch:
                 T = self.body.seg2world_of(roots[c][None], angles, key)
                 X = np.empty((n, m, 3))
                 lo = 0
-                for i, pts in blocks:
+                for i, pts, _ in blocks:
                     _transform_points(T[:, i], pts, X[:, lo:lo + len(pts)])
                     lo += len(pts)
             uv = cam.project(X.reshape(-1, 3)).reshape(n, -1, 2)
@@ -304,13 +350,24 @@ class LimbSearch:
                 bonus = np.take(unexplained[c], flat)
                 bonus &= ~off
                 s = s + UNEXPLAINED_BONUS * bonus       # float64 from here on
+            if end is not None and colour[1][c] is not None:
+                channels, target, spread, elsewhere = colour[1][c]
+                at = flat[:, end]
+                d2 = np.zeros(at.shape)
+                for ch, t in zip(channels, target):
+                    d2 += ((np.take(ch, at) - t) / spread) ** 2
+                like = np.exp(-0.5 * np.maximum(d2 - 1.0, 0.0))
+                like *= np.take(sdfs[c], at) < 0
+                like *= ~np.take(elsewhere, at)
+                like[off[:, end]] = 0.0
+                s[:, end] += END_BONUS * like
             total += s.mean(axis=1)
             used += 1
         if plain:
             return total / max(used, 1), total_plain / max(used, 1)
         return total / max(used, 1)
 
-    def search(self, state, sdfs, rest_labels, known=None, person=None):
+    def search(self, state, sdfs, rest_labels, known=None, person=None, colours=None):
         """Best pose of each limb in turn; returns the new angles and the limbs that moved.
 
         Parameters
@@ -325,6 +382,9 @@ class LimbSearch:
         person : list of array of bool (H, W) or None, optional
             The foreground without cast shadows, where a limb may be drawn to (default: the
             foreground of ``sdfs``).
+        colours : dict of str to list, optional
+            Per limb (an arm), per view, the colour of its end (the hand) to draw it to:
+            None or ``(channels, target, spread, elsewhere)`` (see :meth:`score`).
 
         Returns
         -------
@@ -350,8 +410,15 @@ class LimbSearch:
                                              state.roots)]
         for group in self.groups:
             rest = _rest_of_body(rest_labels, group)
+            colour = (colours or {}).get(group.name)
+            colour = None if colour is None or group.name not in self.ends \
+                or all(x is None for x in colour) else (self.ends[group.name], colour)
+            if colour is not None:
+                # the other arms where they are now: a hand drawn to its colour must not go
+                # into another arm (bare arms have the hands' colour)
+                colour = colour + (self._arm_points(state.roots[0], angles, group),)
             best, gain = self._search_group(state.roots, angles, group, state.cameras, sdfs,
-                                            rest, away, plain_scores)
+                                            rest, away, plain_scores, colour)
             if gain > self.margin:
                 angles = best
                 moved.append((group.name, float(gain)))
@@ -363,6 +430,32 @@ class LimbSearch:
         self._fit_at = None if moved else (state.roots.tobytes(), state.angles.tobytes(),
                                            list(sdfs), list(rest_labels), plain_scores)
         return angles, moved
+
+    def _arm_points(self, root, angles, group):
+        """Interior points (world) of the arms with an end other than ``group``, at
+        ``angles``."""
+        others = [g for g in self.groups if g.name in self.ends and g is not group]
+        if not others:
+            return np.zeros((0, 3))
+        segs = np.concatenate([g.segments for g in others])
+        T = self.body.seg2world(root, angles)
+        sel = np.isin(self.point_segment, segs)
+        T = T[self.point_segment[sel]]
+        return np.einsum("mij,mj->mi", T[:, :3, :3], self.points[sel]) + T[:, :3, 3]
+
+    def _into_other_arm(self, root, trial, colour):
+        """Which draws ``trial`` (N, n_dofs) put the end (``colour[0]``, a hand) into another
+        arm (``colour[2]``, its interior points): closer to one of its points than the hand's
+        and the forearm's radii."""
+        end, _, others = colour
+        if not len(others):
+            return np.zeros(len(trial), bool)
+        prims = self.prims
+        T = self.body.seg2world_of(root[None], trial, (int(prims.segment[end]),))[:, 0]
+        centre = T[:, :3, :3] @ prims.prim2seg[end][:3, 3] + T[:, :3, 3]
+        reach = self.body.dims["hand_r"] + self.body.dims["forearm_r"]
+        d2 = ((centre[:, None, :] - others[None]) ** 2).sum(axis=2).min(axis=1)
+        return d2 < reach ** 2
 
     def _away_from_trunk(self, unexplained, labels, camera, root):
         """``unexplained`` without what lies within an arm's width (``ARM_WIDTHS_AWAY``) of
@@ -426,20 +519,34 @@ class LimbSearch:
         return out
 
     def _search_group(self, roots, angles, group, cameras, sdfs, rest, unexplained,
-                      plain_scores=None):
+                      plain_scores=None, colour=None):
         """Best pose of one limb and the score it gains; ``plain_scores`` (dict), if given,
-        gets the limb's score at ``angles`` without the credit for unexplained foreground."""
+        gets the limb's score at ``angles`` without the credit for unexplained foreground.
+        With the ``colour`` of its end (:meth:`score`) every stage is scored on the whole limb,
+        whose end each stage moves."""
         if not group.name.endswith(self.attract):
             unexplained = [None] * len(unexplained)
         current, current_plain = self.score(roots, angles[None], group.segments, cameras, sdfs,
-                                            rest, unexplained, plain=True)
+                                            rest, unexplained, plain=True, colour=colour)
         current = current[0]
         if plain_scores is not None:
             plain_scores[group.name] = float(current_plain[0])
         self.last_scores[group.name] = current
         poor = self.poor.get(group.name.split()[-1], 0.0)
-        if current >= poor:
-            if not any(u is not None and u.any() for u in unexplained):
+        centre = angles
+        lost_end = False
+        if colour is not None:
+            # how much of its end's colour the limb finds where it is (0-1): a hand not on its
+            # colour in the views that know it is searched for, as a poorly fitting limb is
+            bare = self.score(roots, angles[None], group.segments, cameras, sdfs, rest,
+                              unexplained)[0]
+            share = np.mean(self.point_prim[np.isin(self.point_segment, group.segments)]
+                            == colour[0])
+            seen = [d is not None for d in sdfs]
+            share *= sum(x is not None and s for x, s in zip(colour[1], seen)) / max(sum(seen), 1)
+            lost_end = share > 0 and (current - bare) / (END_BONUS * share) < END_SEEN
+        if current >= poor and not lost_end:
+            if colour is None and not any(u is not None and u.any() for u in unexplained):
                 return angles, 0.0
             # The limb fits; only unexplained foreground could call it away. A cheap probe
             # (few draws, the whole limb at once) decides whether a full search is worth it.
@@ -447,16 +554,18 @@ class LimbSearch:
             probe[1:, group.dofs] = self.rng.uniform(self.body.lower[group.dofs],
                                                      self.body.upper[group.dofs],
                                                      size=(PROBE_DRAWS - 1, len(group.dofs)))
-            gain = self.score(roots, probe, group.segments, cameras, sdfs, rest,
-                              unexplained).max() - current
+            gain = self.score(roots, probe, group.segments, cameras, sdfs, rest, unexplained,
+                              colour=colour).max() - current
             if gain < 0.5 * self.margin:
                 return angles, 0.0
-        centre = angles
         lower, upper = self.body.lower, self.body.upper
         # Each stage: half the draws uniform over the joints' range, half around the current
         # pose; then a narrower round around the stage's best.
         for dofs, segs in group.stages:
-            best = self.score(roots, centre[None], segs, cameras, sdfs, rest, unexplained)[0]
+            if colour is not None:
+                segs = group.segments
+            best = self.score(roots, centre[None], segs, cameras, sdfs, rest, unexplained,
+                              colour=colour)[0]
             width = np.array([group.widths[list(group.dofs).index(d)] for d in dofs])
             for spread in (1.0, 0.3):
                 trial = np.repeat(centre[None], self.draws, axis=0)
@@ -467,12 +576,15 @@ class LimbSearch:
                     trial[half:, dofs] = self.rng.uniform(lower[dofs], upper[dofs],
                                                           size=(self.draws - half, len(dofs)))
                 trial = self.body.clamp(trial)
-                s = self.score(roots, trial, segs, cameras, sdfs, rest, unexplained)
+                s = self.score(roots, trial, segs, cameras, sdfs, rest, unexplained,
+                               colour=colour)
+                if colour is not None:
+                    s[self._into_other_arm(roots[0], trial, colour)] = -np.inf
                 k = int(np.argmax(s))
                 if s[k] > best:
                     centre, best = trial[k], s[k]
         final = self.score(roots, centre[None], group.segments, cameras, sdfs, rest,
-                           unexplained)[0]
+                           unexplained, colour=colour)[0]
         return centre, final - current
 
 

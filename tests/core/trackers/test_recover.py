@@ -158,7 +158,8 @@ def test_legs_are_drawn_only_to_foreground_away_from_the_trunk(body, monkeypatch
     state = D.State(np.stack([p0.root] * 3), p0.angles.copy(), list(cams))
     offered = {}
 
-    def record(self, roots, angles, group, cameras, sdfs, rest, unexplained, scores):
+    def record(self, roots, angles, group, cameras, sdfs, rest, unexplained, scores,
+               colour=None):
         offered[group.name] = [None if u is None else u.copy() for u in unexplained]
         return angles, 0.0
     monkeypatch.setattr(LimbSearch, "_search_group", record)
