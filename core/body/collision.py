@@ -1,10 +1,11 @@
 """Limbs must not pass through each other: sphere proxies and a penetration penalty.
 
 Each segment is approximated by a few spheres along its bone, a little inside its shape. For
-pairs of segments that cannot touch deeply (an arm and the trunk, the two legs), the penalty
-residual of two spheres is how far they overlap, ``max(0, r_i + r_j - |c_i - c_j|)``; the
-differential tracker adds these residuals to its least squares so that a solution keeps the
-limbs apart, and the benchmarks report the largest overlap.
+pairs of segments that cannot touch deeply (an arm and the trunk, the two arms, the two legs),
+the penalty residual of two spheres is how far they overlap,
+``max(0, r_i + r_j - |c_i - c_j|)``; the differential tracker adds these residuals to its least
+squares so that a solution keeps the limbs apart, and the benchmarks report the largest
+overlap.
 """
 
 from dataclasses import dataclass
@@ -33,6 +34,7 @@ _TRUNK = ("pelvis", "abdomen", "chest")
 _PAIRS = (
     [(f"{s}_{arm}", t) for s in "lr" for arm in ("upper_arm", "forearm") for t in _TRUNK]
     + [(f"l_{a}", f"r_{b}") for a in ("thigh", "shank", "foot") for b in ("thigh", "shank", "foot")]
+    + [(f"l_{a}", f"r_{b}") for a in ("upper_arm", "forearm") for b in ("upper_arm", "forearm")]
 )
 
 

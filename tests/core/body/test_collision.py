@@ -29,6 +29,28 @@ def test_arm_through_the_chest_penetrates():
     assert collision.penetration(proxies, body.seg2world(pose)).max() > 0.02
 
 
+def test_forearms_through_each_other_penetrate():
+    """The arms are kept apart as the legs are: a hand drawn into the other arm (bare arms have
+    the hands' colour) is a pose no one takes. Forearms crossed in front of the body one
+    above the other do not touch."""
+    body = bm.make_body("full")
+    proxies = collision.body_proxies(body)
+    owner = [body.segment_names[k] for k in proxies.segment]
+
+    def overlaps(l_flex, r_flex):
+        pose = body.rest_pose()
+        for side, flex in (("l", l_flex), ("r", r_flex)):
+            pose.angles[body.dof_index(f"{side}_shoulder_flex")] = flex
+            pose.angles[body.dof_index(f"{side}_elbow_flex")] = 1.4
+            pose.angles[body.dof_index(f"{side}_shoulder_rot")] = 1.0
+        pen = collision.penetration(proxies, body.seg2world(pose))
+        return pen.max(), {(owner[i], owner[j]) for i, j in proxies.pairs[pen > 0]}
+
+    depth, pairs = overlaps(1.4, 1.4)
+    assert depth > 0.04 and pairs == {("l_forearm", "r_forearm")}
+    assert overlaps(1.4, 0.9)[0] == 0.0
+
+
 def test_penalty_jacobian_against_finite_differences(rng):
     body = bm.make_body("full")
     pose = body.rest_pose(se3.transform(p=[0, 0, 1.0]))
