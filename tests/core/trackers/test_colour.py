@@ -50,6 +50,20 @@ def _arm_over_the_shirt(monkeypatch, body, poses, cams):
     return [[scene.render_frame(f, c) for c in range(len(cams))] for f in range(len(poses))]
 
 
+def _anchored(body, settings, frame, cams, right, wrong):
+    """A tracker anchored at pose ``right`` on ``frame`` (colour plates and their labels, one
+    per camera), the frame's prepared images, and the states at ``right`` and ``wrong``."""
+    images = [prepare_images(plates.to_gray_float(image), settings.levels,
+                             settings.smooth_sigma, label >= 0, colour=image)
+              for image, label in frame]
+    tracker = D.DifferentialTracker(body, True, settings)
+    V = len(cams)
+    at_right = D.State(np.stack([right.root] * V), right.angles.copy(), list(cams))
+    at_wrong = D.State(np.stack([right.root] * V), wrong.angles.copy(), list(cams))
+    tracker.set_anchor(at_right, images, tracker.render_views(at_right))
+    return tracker, images, at_right, at_wrong
+
+
 @pytest.mark.parametrize("chroma_weight", [0.5, 0.0])
 def test_the_anchors_colour_tells_an_arm_from_a_shirt_of_its_grey(monkeypatch, chroma_weight):
     """A forearm across the belly, skin-coloured on a shirt of the same grey level. Moved to
@@ -66,13 +80,7 @@ def test_the_anchors_colour_tells_an_arm_from_a_shirt_of_its_grey(monkeypatch, c
                   key=lambda c: (c.R.T @ -c.t)[1])[:2]         # the two facing the body
     settings = D.Settings(chroma_weight=chroma_weight, limb_search=False)
     (frame,) = _arm_over_the_shirt(monkeypatch, body, [p0], cams)
-    images = [prepare_images(plates.to_gray_float(image), settings.levels,
-                             settings.smooth_sigma, label >= 0, colour=image)
-              for image, label in frame]
-    tracker = D.DifferentialTracker(body, True, settings)
-    right = D.State(np.stack([p0.root] * 2), p0.angles.copy(), list(cams))
-    moved = D.State(np.stack([p0.root] * 2), wrong.angles.copy(), list(cams))
-    tracker.set_anchor(right, images, tracker.render_views(right))
+    tracker, images, right, moved = _anchored(body, settings, frame, cams, p0, wrong)
     arm = np.array([body.segment_names.index(n) for n in ("l_upper_arm", "l_forearm")])
     shift = 1000 * np.linalg.norm(body.joints(wrong) - body.joints(p0), axis=1).max()
     assert shift > 60
@@ -203,13 +211,7 @@ def test_a_hand_lost_in_front_of_the_shirt_is_found_by_its_colour(monkeypatch, h
                   key=lambda c: (c.R.T @ -c.t)[1])[:3]
     settings = D.Settings(hands=hands)
     frame = _bare_hands(monkeypatch, body, p0, cams)
-    images = [prepare_images(plates.to_gray_float(image), settings.levels,
-                             settings.smooth_sigma, label >= 0, colour=image)
-              for image, label in frame]
-    tracker = D.DifferentialTracker(body, True, settings)
-    right = D.State(np.stack([p0.root] * 3), p0.angles.copy(), list(cams))
-    moved = D.State(np.stack([p0.root] * 3), wrong.angles.copy(), list(cams))
-    tracker.set_anchor(right, images, tracker.render_views(right))
+    tracker, images, _, moved = _anchored(body, settings, frame, cams, p0, wrong)
     wrist = JOINT_INDEX["l_wrist"]
     shift = 1000 * np.linalg.norm(body.joints(wrong)[wrist] - body.joints(p0)[wrist])
     assert shift > 150
