@@ -384,8 +384,12 @@ class _Fit:
 
     def _solve_all(self, state, obs=None):
         obs = self.obs if obs is None else obs
+        # The lengths stay as the frames' fits left them where the animator flipped a part:
+        # with the lengths free (and their prior heavy-tailed in one view) a flipped limb comes
+        # back to its first depth through a shorter bone.
+        fit_dims = self.fit_dims and not self.flipped
         state, cost, _ = _fit(self.kin, obs, self.weights, state,
-                              **self.options(state, None, fit_dims=self.fit_dims))
+                              **self.options(state, None, fit_dims=fit_dims))
         return state, cost
 
     def _check_swaps(self, state, cost):
