@@ -102,14 +102,15 @@ class _Problem:
     (scaled orthographic) camera; ``kappa`` stays the camera's own but in the frames where
     ``perspective`` (bool, or per frame) is true.
     Residuals: the weighted click errors (2 per clicked joint and view, robust), then the
-    priors.
+    priors (the lengths' soft L1 beyond ``dims_loss`` spreads when given, ``_prior_residual``).
     """
 
     def __init__(self, kin, obs, weights, state, *, free_root, free_angles=True, free_cams=None,
                  fit_dims=True, calibrated=True, loss_scale=LOSS_SCALE_PX, dims_range=DIMS_RANGE,
                  pose_prior=None, prior_frames=None, tilt=None, tilt_frames=None,
-                 perspective=False, dims_prior=None):
+                 perspective=False, dims_prior=None, dims_loss=None):
         self.kin = kin
+        self.dims_loss = dims_loss
         # (mean (D,), relative sigma (D,)) of the lengths about ``size * mean``: the template's
         # proportions and DIMS_PRIOR_SIGMA unless a learned proportions prior is given.
         self.dims_mean, self.dims_sigma = (kin.default_dims, DIMS_PRIOR_SIGMA) \
@@ -343,8 +344,10 @@ class _Problem:
         row = 2 * M
         if self.fit_dims:
             d0 = self.dims_mean
-            wd = CLICK_SIGMA_PX / np.maximum(self.dims_sigma, DIMS_PRIOR_FLOOR_M / d0)
-            res.append(wd * (dims / d0 - size))
+            spread = np.maximum(self.dims_sigma, DIMS_PRIOR_FLOOR_M / d0)
+            z, dz = _prior_residual((dims / d0 - size) / spread, self.dims_loss)
+            wd = CLICK_SIGMA_PX * dz / spread
+            res.append(CLICK_SIGMA_PX * z)
             r = row + np.arange(self.D)
             block(r, np.arange(self.D), wd / d0)
             block(r, self.D, -wd)
@@ -506,6 +509,19 @@ class _Problem:
         uv, _, _ = problem._project(X, x[problem.off_cam:].reshape(-1, _CAM_PARAMS))
         err = np.linalg.norm(uv - problem.obs, axis=-1)
         return np.where(problem.mask, err, np.nan)
+
+
+def _prior_residual(z, scale):
+    """A Gaussian prior's whitened residuals ``z`` made soft L1 of ``scale`` (in spreads; None:
+    left Gaussian), as residuals ``r`` with ``0.5 r^2 = scale^2 (sqrt(1 + z^2 / scale^2) - 1)``,
+    and ``dr / dz``."""
+    if scale is None:
+        return z, np.ones_like(z)
+    q = np.sqrt(1.0 + (z / scale) ** 2)
+    # 2 (q - 1) = 2 (z / scale)^2 / (q + 1), without cancelling near z = 0
+    r = z * np.sqrt(2.0 / (1.0 + q))
+    dz = np.sqrt(0.5 * (1.0 + q)) / q
+    return r, dz
 
 
 def _rho_px(errors, c=LOSS_SCALE_PX):
