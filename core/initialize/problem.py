@@ -345,9 +345,15 @@ class _Problem:
         if self.fit_dims:
             d0 = self.dims_mean
             spread = np.maximum(self.dims_sigma, DIMS_PRIOR_FLOOR_M / d0)
-            z, dz = _prior_residual((dims / d0 - size) / spread, self.dims_loss)
-            wd = CLICK_SIGMA_PX * dz / spread
-            res.append(CLICK_SIGMA_PX * z)
+            if self.dims_loss is None:
+                # Gaussian: the arithmetic as it always was, so that calibrated fits are the
+                # same to the bit
+                wd = CLICK_SIGMA_PX / spread
+                res.append(wd * (dims / d0 - size))
+            else:
+                z, dz = _prior_residual((dims / d0 - size) / spread, self.dims_loss)
+                wd = CLICK_SIGMA_PX * dz / spread
+                res.append(CLICK_SIGMA_PX * z)
             r = row + np.arange(self.D)
             block(r, np.arange(self.D), wd / d0)
             block(r, self.D, -wd)
