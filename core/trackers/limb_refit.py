@@ -123,7 +123,7 @@ class LimbRefit:
         key = (id(self.anchor_terms), level)
         if getattr(self, "_end_cache", (None,))[0] == key:
             return self._end_cache[1]
-        prims = self.body.primitives()
+        prims = self.search.prims
         terms, chroma = self.anchor_terms[level] or [], self.chroma_terms[level] or []
         scale = self.settings.chroma_scale
         names = self.body.segment_names

@@ -100,11 +100,10 @@ def limb_groups(body):
     return groups
 
 
-def end_primitives(body, groups, kinds=("arm",)):
-    """The primitive at the end of each limb of ``kinds`` (an arm's hand): of the limb's last
-    segment, the one farthest from its first segment's primitives. Returns group name ->
-    primitive index."""
-    prims = body.primitives()
+def end_primitives(prims, groups, kinds=("arm",)):
+    """The primitive at the end of each limb of ``kinds`` (an arm's hand) among the body's
+    primitives ``prims``: of the limb's last segment, the one farthest from its first
+    segment's primitives. Returns group name -> primitive index."""
     centres = prims.prim2seg[:, :3, 3]
     out = {}
     for g in groups:
@@ -249,7 +248,7 @@ class LimbSearch:
         self.prims = prims = body.primitives()
         self.point_segment, self.points = interior_points(prims)
         self.point_prim = np.repeat(np.arange(len(prims)), POINTS_PER_PRIMITIVE)
-        self.ends = end_primitives(body, self.groups)
+        self.ends = end_primitives(prims, self.groups)
         self.trunk = np.array([k for k, n in enumerate(body.segment_names)
                                if n in TRUNK_SEGMENTS], int)
         self._blocks = {}
