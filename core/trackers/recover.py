@@ -50,7 +50,7 @@ BROAD_DRAWS = 2048
 BROAD_POINTS = 6
 BROAD_KEEP = 24
 BROAD_LOCAL = 7
-BROAD_WIDTH = 0.15
+BROAD_WIDTHS = (0.15, 0.05)
 BROAD_KINDS = ("arm",)
 UNEXPLAINED_BONUS = 0.6  # extra credit for foreground that no part of the model covers
 UNEXPLAINED_MIN_PX = 5  # unexplained foreground thinner than this is the build, not a limb
@@ -546,15 +546,18 @@ class LimbSearch:
         if colour is not None:
             s[self._into_other_arm(roots[0], trial, colour)] = -np.inf
         top = trial[np.argsort(s)[-BROAD_KEEP:]]
-        near = np.repeat(top, BROAD_LOCAL, axis=0)
-        near[:, dofs] += self.rng.normal(size=(len(near), len(dofs))) * BROAD_WIDTH
-        top = self.body.clamp(np.concatenate([top, near]))
-        full = self.score(roots, top, group.segments, cameras, sdfs, rest, unexplained,
-                          colour=colour)
-        if colour is not None:
-            full[self._into_other_arm(roots[0], top, colour)] = -np.inf
-        k = int(np.argmax(full))
-        return top[k], float(full[k])
+        for keep, width in zip((BROAD_KEEP, BROAD_KEEP // 2), BROAD_WIDTHS):
+            top = top[-keep:]
+            near = np.repeat(top, BROAD_LOCAL, axis=0)
+            near[:, dofs] += self.rng.normal(size=(len(near), len(dofs))) * width
+            top = self.body.clamp(np.concatenate([top, near]))
+            full = self.score(roots, top, group.segments, cameras, sdfs, rest, unexplained,
+                              colour=colour)
+            if colour is not None:
+                full[self._into_other_arm(roots[0], top, colour)] = -np.inf
+            order = np.argsort(full)
+            top, full = top[order], full[order]
+        return top[-1], float(full[-1])
 
     def _search_group(self, roots, angles, group, cameras, sdfs, rest, unexplained,
                       plain_scores=None, colour=None):
@@ -586,6 +589,7 @@ class LimbSearch:
         fits = current >= poor and not lost_end
         if fits and colour is None and not any(u is not None and u.any() for u in unexplained):
             return angles, 0.0
+        broad = None
         if group.name.endswith(BROAD_KINDS):
             # The whole arm drawn broadly: a fitting one is searched only when that finds a
             # better pose (only unexplained foreground or its end's colour could call it
@@ -634,6 +638,9 @@ class LimbSearch:
                     centre, best = trial[k], s[k]
         final = self.score(roots, centre[None], group.segments, cameras, sdfs, rest,
                            unexplained, colour=colour)[0]
+        if broad is not None and broad_score > final:
+            # a stage scores part of the limb: it may trade the whole limb's fit away
+            centre, final = broad, broad_score
         return centre, final - current
 
 
