@@ -246,11 +246,14 @@ class LimbSearch:
         each, dance05_hard went from 134.7 to 110.8 mm, punch02 50.0 -> 35.0, sword02 42.6 ->
         33.4, and walk131_hard, that walk with hands on hips, 39.5 -> 45.3.
     seed : int
+    broad : bool
+        Draw the limbs of ``BROAD_KINDS`` broadly before their stages (:meth:`_broad`).
     """
 
     def __init__(self, body, draws=160, margin=0.08, poor=None, seed=0,
-                 attract=("leg", "arm")):
+                 attract=("leg", "arm"), broad=True):
         self.body = body
+        self.broad = broad
         self.poor = dict(POOR if poor is None else poor)
         self.attract = attract
         self.draws = draws
@@ -543,9 +546,12 @@ class LimbSearch:
                                            size=(BROAD_DRAWS - 1, len(dofs)))
         s = self.score(roots, trial, group.segments, cameras, sdfs, rest, unexplained,
                        colour=colour, sparse=True)
+        top = trial[np.argsort(s)[-2 * BROAD_KEEP:]]
         if colour is not None:
-            s[self._into_other_arm(roots[0], trial, colour)] = -np.inf
-        top = trial[np.argsort(s)[-BROAD_KEEP:]]
+            # (judged on the best only: the hand's place costs a chain's kinematics per draw)
+            top = top[~self._into_other_arm(roots[0], top, colour)]
+            if not len(top):
+                return angles, -np.inf
         for keep, width in zip((BROAD_KEEP, BROAD_KEEP // 2), BROAD_WIDTHS):
             top = top[-keep:]
             near = np.repeat(top, BROAD_LOCAL, axis=0)
@@ -590,7 +596,7 @@ class LimbSearch:
         if fits and colour is None and not any(u is not None and u.any() for u in unexplained):
             return angles, 0.0
         broad = None
-        if group.name.endswith(BROAD_KINDS):
+        if self.broad and group.name.endswith(BROAD_KINDS):
             # The whole arm drawn broadly: a fitting one is searched only when that finds a
             # better pose (only unexplained foreground or its end's colour could call it
             # away); the stages start from the better of the two.
