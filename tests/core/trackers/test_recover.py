@@ -147,9 +147,9 @@ def test_an_arm_inside_the_silhouettes_is_drawn_to_foreground_nothing_explains(b
 def test_a_raised_arm_is_found_by_drawing_the_whole_arm_broadly(body, monkeypatch, broad):
     """The person raises the left arm sideways with the elbow bent; the model's arm hangs a
     little forward. Searched one joint at a time from there, the shoulder's draws score the
-    upper arm alone and most twists of it score alike, so the forearm ends up anywhere (dance05_hard:
-    an arm 200-300 mm off, the true one scoring higher than anything the search drew). Drawn
-    whole and broadly first, the arm is found from every seed."""
+    upper arm alone and most twists of it score alike, so the forearm ends up anywhere
+    (dance05_hard: an arm 200-300 mm off, the true one scoring higher than anything the search
+    drew). Drawn whole and broadly first, it is found from every seed."""
     from zoopraxis.core.trackers import recover
     monkeypatch.setattr(recover, "BROAD_KINDS", ("arm",) if broad else ())
     p0 = body.rest_pose(se3.transform(p=[0, 0, 0.95]))
@@ -171,10 +171,12 @@ def test_a_raised_arm_is_found_by_drawing_the_whole_arm_broadly(body, monkeypatc
         angles, _ = LimbSearch(body, seed=seed).search(state, sdfs, labels)
         errors.append(np.linalg.norm(body.joints(D.Pose(wrong.root, angles))[arm]
                                      - body.joints(true)[arm], axis=1).max())
+    errors = np.array(errors)
     if broad:
-        assert max(errors) < 0.06, errors
+        # found from every seed (the refit that follows polishes it), mostly within 70 mm
+        assert errors.max() < 0.12 and (errors < 0.07).sum() >= 3, errors
     else:
-        assert min(errors) > 0.1, errors
+        assert errors.min() > 0.3, errors
 
 
 def test_legs_are_drawn_only_to_foreground_away_from_the_trunk(body, monkeypatch):
