@@ -46,7 +46,7 @@ PROBE_DRAWS = 48        # draws of the quick check before a full search of a fit
 # cannot be found (every shoulder angle scores alike there), nor by a few draws of the whole
 # limb: the nearest of a thousand uniform draws is still about 70 mm from a given elbow and
 # wrist. The broad round also decides whether a fitting arm is searched.
-BROAD_DRAWS = 1024
+BROAD_DRAWS = 2048
 BROAD_POINTS = 6
 BROAD_KEEP = 24
 BROAD_LOCAL = 7
