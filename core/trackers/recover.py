@@ -39,6 +39,19 @@ SHARED_CREDIT = 0.4     # credit for foreground that the rest of the body alread
 # body): search arms only when they are mostly outside the silhouettes.
 POOR = {"leg": 0.6, "arm": 0.0}
 PROBE_DRAWS = 48        # draws of the quick check before a full search of a fitting limb
+# An arm is first drawn broadly: this many poses of all its joints at once, uniform over their
+# ranges, each scored on a few of its points (``BROAD_POINTS`` per primitive); the best
+# ``BROAD_KEEP``, and ``BROAD_LOCAL`` draws around each (``BROAD_WIDTH`` radians), are scored
+# on all of them. Stage by stage, an arm whose upper arm lies inside the trunk's silhouette
+# cannot be found (every shoulder angle scores alike there), nor by a few draws of the whole
+# limb: the nearest of a thousand uniform draws is still about 70 mm from a given elbow and
+# wrist. The broad round also decides whether a fitting arm is searched.
+BROAD_DRAWS = 2048
+BROAD_POINTS = 6
+BROAD_KEEP = 24
+BROAD_LOCAL = 7
+BROAD_WIDTHS = (0.15, 0.05)
+BROAD_KINDS = ("arm",)
 UNEXPLAINED_BONUS = 0.6  # extra credit for foreground that no part of the model covers
 UNEXPLAINED_MIN_PX = 5  # unexplained foreground thinner than this is the build, not a limb
 # Limbs are drawn only to unexplained foreground this many arm widths away from the model's
@@ -233,11 +246,14 @@ class LimbSearch:
         each, dance05_hard went from 134.7 to 110.8 mm, punch02 50.0 -> 35.0, sword02 42.6 ->
         33.4, and walk131_hard, that walk with hands on hips, 39.5 -> 45.3.
     seed : int
+    broad : bool
+        Draw the limbs of ``BROAD_KINDS`` broadly before their stages (:meth:`_broad`).
     """
 
     def __init__(self, body, draws=160, margin=0.08, poor=None, seed=0,
-                 attract=("leg", "arm")):
+                 attract=("leg", "arm"), broad=True):
         self.body = body
+        self.broad = broad
         self.poor = dict(POOR if poor is None else poor)
         self.attract = attract
         self.draws = draws
@@ -261,7 +277,7 @@ class LimbSearch:
         self.rng = np.random.default_rng([self.seed, *(int(k) for k in key)])
 
     def score(self, roots, angles, segments, cameras, sdfs, rest, unexplained=None,
-              plain=False, colour=None):
+              plain=False, colour=None, sparse=False):
         """Silhouette score of a batch of poses for one limb, mean over points and views.
 
         Parameters
@@ -289,6 +305,8 @@ class LimbSearch:
             ``(channels, target, spread, elsewhere)``: the chromaticity images (H, W) of view
             ``c``, the colour's chromaticity and spread, and the pixels that earn nothing (the
             other arm, the face) (:meth:`LimbRefit.end_colours`).
+        sparse : bool
+            Score on ``BROAD_POINTS`` points per primitive only (a broad round's many draws).
 
         Returns
         -------
@@ -297,13 +315,15 @@ class LimbSearch:
             With ``plain`` only.
         """
         key = tuple(int(k) for k in segments)
-        blocks = self._blocks.get(key)
+        blocks = self._blocks.get((key, sparse))
         if blocks is None:
             # the limb's points, segment by segment: (position in segments, points, their
-            # primitives)
-            blocks = self._blocks[key] = [(i, self.points[self.point_segment == k],
-                                           self.point_prim[self.point_segment == k])
-                                          for i, k in enumerate(key)]
+            # primitives); sparse: the first of each primitive's (they are drawn at random)
+            use = (np.arange(len(self.points)) % POINTS_PER_PRIMITIVE < BROAD_POINTS
+                   if sparse else np.ones(len(self.points), bool))
+            blocks = self._blocks[(key, sparse)] = [
+                (i, self.points[(self.point_segment == k) & use],
+                 self.point_prim[(self.point_segment == k) & use]) for i, k in enumerate(key)]
         m = sum(len(pts) for _, pts, _ in blocks)
         end = None
         if colour is not None and any(x is not None for x in colour[1]):
@@ -517,6 +537,34 @@ class LimbSearch:
                                                state.cameras, sdfs, rest)[0])
         return out
 
+    def _broad(self, roots, angles, group, cameras, sdfs, rest, unexplained, colour):
+        """The broad round (``BROAD_DRAWS``): the best draw of the whole limb and its score
+        (on all points)."""
+        dofs = group.dofs
+        trial = np.repeat(angles[None], BROAD_DRAWS, axis=0)
+        trial[1:, dofs] = self.rng.uniform(self.body.lower[dofs], self.body.upper[dofs],
+                                           size=(BROAD_DRAWS - 1, len(dofs)))
+        s = self.score(roots, trial, group.segments, cameras, sdfs, rest, unexplained,
+                       colour=colour, sparse=True)
+        top = trial[np.argsort(s)[-2 * BROAD_KEEP:]]
+        if colour is not None:
+            # (judged on the best only: the hand's place costs a chain's kinematics per draw)
+            top = top[~self._into_other_arm(roots[0], top, colour)]
+            if not len(top):
+                return angles, -np.inf
+        for keep, width in zip((BROAD_KEEP, BROAD_KEEP // 2), BROAD_WIDTHS):
+            top = top[-keep:]
+            near = np.repeat(top, BROAD_LOCAL, axis=0)
+            near[:, dofs] += self.rng.normal(size=(len(near), len(dofs))) * width
+            top = self.body.clamp(np.concatenate([top, near]))
+            full = self.score(roots, top, group.segments, cameras, sdfs, rest, unexplained,
+                              colour=colour)
+            if colour is not None:
+                full[self._into_other_arm(roots[0], top, colour)] = -np.inf
+            order = np.argsort(full)
+            top, full = top[order], full[order]
+        return top[-1], float(full[-1])
+
     def _search_group(self, roots, angles, group, cameras, sdfs, rest, unexplained,
                       plain_scores=None, colour=None):
         """Best pose of one limb and the score it gains; ``plain_scores`` (dict), if given,
@@ -544,9 +592,21 @@ class LimbSearch:
             seen = [d is not None for d in sdfs]
             share *= sum(x is not None and s for x, s in zip(colour[1], seen)) / max(sum(seen), 1)
             lost_end = share > 0 and (current - bare) / (END_BONUS * share) < END_SEEN
-        if current >= poor and not lost_end:
-            if colour is None and not any(u is not None and u.any() for u in unexplained):
+        fits = current >= poor and not lost_end
+        if fits and colour is None and not any(u is not None and u.any() for u in unexplained):
+            return angles, 0.0
+        broad = None
+        if self.broad and group.name.endswith(BROAD_KINDS):
+            # The whole arm drawn broadly: a fitting one is searched only when that finds a
+            # better pose (only unexplained foreground or its end's colour could call it
+            # away); the stages start from the better of the two.
+            broad, broad_score = self._broad(roots, angles, group, cameras, sdfs, rest,
+                                             unexplained, colour)
+            if fits and broad_score - current < 0.5 * self.margin:
                 return angles, 0.0
+            if broad_score > current:
+                centre = broad
+        elif fits:
             # The limb fits; only unexplained foreground could call it away. A cheap probe
             # (few draws, the whole limb at once) decides whether a full search is worth it.
             probe = np.repeat(angles[None], PROBE_DRAWS, axis=0)
@@ -584,6 +644,9 @@ class LimbSearch:
                     centre, best = trial[k], s[k]
         final = self.score(roots, centre[None], group.segments, cameras, sdfs, rest,
                            unexplained, colour=colour)[0]
+        if broad is not None and broad_score > final:
+            # a stage scores part of the limb: it may trade the whole limb's fit away
+            centre, final = broad, broad_score
         return centre, final - current
 
 

@@ -62,6 +62,9 @@ class Stepper:
         first round's body kept out of them)."""
         return 1
 
+    def round_begins(self, index, rounds):
+        """Round ``index`` of ``rounds`` (:meth:`rounds`) is about to be tracked."""
+
     def frame_data(self, frame):
         """Everything a step needs of one frame: its prepared images."""
         raise NotImplementedError
@@ -126,6 +129,12 @@ class DifferentialStepper(Stepper):
 
     def rounds(self, use_bg):
         return 2 if sum(use_bg) >= 2 else 1
+
+    def round_begins(self, index, rounds):
+        # The first of two rounds tracks the body to keep it out of the next round's
+        # backgrounds: the limb search's broad draws, its dearest part, wait for the last.
+        if self.tracker.search is not None:
+            self.tracker.search.broad = index == rounds - 1
 
     def frame_data(self, frame):
         take, settings = self.take, self.settings

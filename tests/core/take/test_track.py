@@ -69,6 +69,21 @@ def test_tracks_a_short_walk(take):
     assert res.angles.shape == (N, body.n_dofs) and res.roots.shape == (N, 4, 4)
 
 
+def test_the_limb_search_draws_broadly_in_the_last_round_only(take, monkeypatch):
+    """The first of two rounds tracks the body for the second round's backgrounds; the
+    search's broad draws of the arms (its dearest part) are left to the round that counts."""
+    DifferentialStepper = stepper_module.DifferentialStepper
+    seen = []
+    begins = DifferentialStepper.round_begins
+
+    def record(self, index, rounds):
+        begins(self, index, rounds)
+        seen.append((index, rounds, self.tracker.search.broad))
+    monkeypatch.setattr(DifferentialStepper, "round_begins", record)
+    run(take)
+    assert seen == [(0, 2, False), (1, 2, True)]
+
+
 def test_later_anchor_pulls_the_end_back(take):
     scene, joints, body, poses = take
     res = run(take, anchor_frames=(0, N - 1))
