@@ -10,8 +10,10 @@ For each limb (each leg, each arm) in turn, with the rest of the body held, pose
 joints are drawn around the current ones and scored on the foreground silhouettes of all views:
 points sampled inside the limb's primitives should project inside the foreground (by the signed
 distance), and into foreground that the rest of the body does not already explain. Drawing is
-done in two rounds (wide, then narrow around the best). Everything is vectorized over draws and
-points; the whole search costs a few milliseconds a frame. When a limb's best draw clearly beats
+done in two rounds (wide, then narrow around the best). An arm is first drawn whole and broadly
+(:meth:`LimbSearch._broad`): thousands of draws over its range scored on a few points each,
+the best refined on all of them; its stages start from there. Everything is vectorized over
+draws and points. When a limb's best draw clearly beats
 its current pose, the tracker refines from it (:meth:`DifferentialTracker.step` with ``start``).
 
 On colour plates an arm is also drawn by its hand's colour (``END_BONUS``), and searched when
