@@ -342,6 +342,7 @@ def run_take(stepper, plates, cameras, init, views, offsets, frames, inside, *, 
         stopped it."""
         nonlocal spare_core, total
         total = first_total
+        # before the worker processes of this round fork: they inherit what it sets
         stepper.round_begins(round_index, rounds)
         states, reports = dict(anchor_poses), dict.fromkeys(anchor_frames)
         # First the single passes and, between two anchors, each pass up to a little past the

@@ -10,11 +10,12 @@ For each limb (each leg, each arm) in turn, with the rest of the body held, pose
 joints are drawn around the current ones and scored on the foreground silhouettes of all views:
 points sampled inside the limb's primitives should project inside the foreground (by the signed
 distance), and into foreground that the rest of the body does not already explain. Drawing is
-done in two rounds (wide, then narrow around the best). An arm is first drawn whole and broadly
-(:meth:`LimbSearch._broad`): thousands of draws over its range scored on a few points each,
-the best refined on all of them; its stages start from there. Everything is vectorized over
-draws and points. When a limb's best draw clearly beats its current pose, the tracker refines
-from it (:meth:`DifferentialTracker.step` with ``start``).
+done in two rounds (wide, then narrow around the best). An arm that anything could call away
+is first drawn whole and broadly (:meth:`LimbSearch._broad`, unless ``LimbSearch.broad`` is
+off: the first of two tracking rounds): thousands of draws over its range scored on a few
+points each, the best refined on all of them; its stages start from there. Everything is
+vectorized over draws and points. When a limb's best draw clearly beats its current pose, the
+tracker refines from it (:meth:`DifferentialTracker.step` with ``start``).
 
 On colour plates an arm is also drawn by its hand's colour (``END_BONUS``), and searched when
 its hand is not on that colour (``END_SEEN``), never into the other arm: the one cue that finds
@@ -44,7 +45,7 @@ PROBE_DRAWS = 48        # draws of the quick check before a full search of a fit
 # An arm is first drawn broadly: this many poses of all its joints at once, uniform over their
 # ranges, each scored on a few of its points (``BROAD_POINTS`` per primitive); the best
 # ``BROAD_KEEP``, and ``BROAD_LOCAL`` draws around each (``BROAD_WIDTHS[0]`` radians), are
-# scored on all of them, then the best half of those again (``BROAD_WIDTHS[1]``). Stage by
+# scored on all of them, then the best ``BROAD_KEEP // 2`` again (``BROAD_WIDTHS[1]``). Stage by
 # stage, an arm whose upper arm lies inside the trunk's silhouette cannot be found (every
 # shoulder angle scores alike there), nor by a few draws of the whole limb: the nearest of a
 # thousand uniform draws is still about 70 mm from a given elbow and wrist. The broad round

@@ -72,16 +72,24 @@ def test_tracks_a_short_walk(take):
 def test_the_limb_search_draws_broadly_in_the_last_round_only(take, monkeypatch):
     """The first of two rounds tracks the body for the second round's backgrounds; the
     search's broad draws of the arms (its dearest part) are left to the round that counts."""
+    from zoopraxis.core.trackers.recover import LimbSearch
     DifferentialStepper = stepper_module.DifferentialStepper
-    seen = []
-    begins = DifferentialStepper.round_begins
+    seen, broad = [], []
+    begins, draw = DifferentialStepper.round_begins, LimbSearch._broad
 
     def record(self, index, rounds):
         begins(self, index, rounds)
         seen.append((index, rounds, self.tracker.search.broad))
+        broad.append(0)
+
+    def count(self, *args, **kwargs):
+        broad[-1] += 1
+        return draw(self, *args, **kwargs)
     monkeypatch.setattr(DifferentialStepper, "round_begins", record)
+    monkeypatch.setattr(LimbSearch, "_broad", count)
     run(take)
     assert seen == [(0, 2, False), (1, 2, True)]
+    assert broad[0] == 0 and broad[1] > 0
 
 
 def test_later_anchor_pulls_the_end_back(take):
