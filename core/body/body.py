@@ -428,14 +428,22 @@ class BodyModel:
         root, angles, single = self._batch(pose, angles)
         single = single and angles.shape[0] == 1
         dofs, steps, pick = self._chain_plan(tuple(int(k) for k in segments))
-        E = se3.exp_se3(self.twists[dofs][None] * angles[:, dofs][..., None])
-        T_chain = np.empty((max(root.shape[0], angles.shape[0]), len(steps), 4, 4))
+        A = angles[:, dofs]
+        n = max(root.shape[0], A.shape[0])
+        # One root with a batch of angles that differ in a few DOFs only (a limb's draws):
+        # the chain above them is the same for every draw and is formed once.
+        same = ((A == A[:1]).all(axis=0) if root.shape[0] == 1 and n > 1
+                else np.zeros(len(dofs), bool))
+        E_one = se3.exp_se3(self.twists[dofs[same]] * A[0, same][:, None])
+        E_all = se3.exp_se3(self.twists[dofs[~same]][None] * A[:, ~same][..., None])
+        where = np.cumsum(same) - 1, np.cumsum(~same) - 1
+        T_chain = []
         for i, parent, local in steps:
-            T = root if parent < 0 else T_chain[:, parent]
+            T = root if parent < 0 else T_chain[parent]
             for j in local:
-                T = T @ E[:, j]
-            T_chain[:, i] = T
-        T = T_chain[:, pick]
+                T = T @ (E_one[where[0][j]][None] if same[j] else E_all[:, where[1][j]])
+            T_chain.append(T)
+        T = np.stack([np.broadcast_to(T_chain[k], (n, 4, 4)) for k in pick], axis=1)
         return T[0] if single else T
 
     @staticmethod

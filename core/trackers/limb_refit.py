@@ -196,6 +196,7 @@ class LimbRefit:
         names = self.body.segment_names
         groups = {g.name: g for g in self.search.groups}
         out = {}
+        planes = {}     # per view, its chromaticity channels made contiguous once (for gathers)
         for name, per_view in ends.items():
             others = [int(k) for o in ends if o != name for k in groups[o].segments]
             if "head" in names:
@@ -218,7 +219,9 @@ class LimbRefit:
                 elsewhere = np.isin(labels[c], others)
                 if person is not None and person[c] is not None:
                     elsewhere |= ~person[c]
-                colours.append(([ch[0][..., 0] for ch in im.chroma], target, spread, elsewhere))
+                if c not in planes:
+                    planes[c] = [np.ascontiguousarray(ch[0][..., 0]) for ch in im.chroma]
+                colours.append((planes[c], target, spread, elsewhere))
             out[name] = colours
         return out
 
@@ -266,7 +269,10 @@ class LimbRefit:
         """The limb search after a step (:meth:`DifferentialTracker.step`), and the refit
         from what it moved when that explains the frame better; returns the frame's state and
         report, with the limbs' silhouette fit and the foreground left unexplained."""
-        sdfs = [None if im.sdf is None else im.sdf[0][..., 0] for im in images_t1]
+        # contiguous: the search gathers from them at thousands of points per draw batch, and
+        # a gather from a strided view copies the whole image first
+        sdfs = [None if im.sdf is None else np.ascontiguousarray(im.sdf[0][..., 0])
+                for im in images_t1]
         if all(d is None for d in sdfs):
             return state, report
         labels = [r.label for r in report.renders]
