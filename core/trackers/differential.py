@@ -78,6 +78,9 @@ class Settings:
     pose_space_weight: float = 0.01   # one calibrated view: pull of the angles towards the
                                       # pose space learned from capture (``pose_space``),
                                       # relative to the data (0: none)
+    pose_space_views: float = 0.2     # two calibrated views or more: the pull's share of
+                                      # one view's (it holds what they leave free: the
+                                      # pelvis's turn traded for the hips' rotation)
     damping: float = 1e-3             # initial Levenberg-Marquardt damping
     collision_weight: float = 3e4     # limb overlap penalty, per square metre
     threads: int = 1                  # >1: views rendered, prepared and (uncalibrated) solved in
@@ -657,8 +660,14 @@ class DifferentialTracker(Anchor, LimbRefit):
                     prior_delta[:3] -= M[:3, 3:6] @ prior_delta[3:6]
                 A = Hs + lam * np.diag(diag) + np.diag(reg)
                 rhs = -(gs - reg * prior_delta)
-                pose_term = None if self.pose_space is None or V != 1 else \
-                    self.pose_space.system(state.angles, diag, self.layout(1)[2])
+                # Several views measure more of the pose, but not all: the pelvis's turn about
+                # the vertical trades for both hips' rotation (the thighs turn about their own
+                # axes, which their outlines hardly show), and a walker's pelvis drifted 30-40
+                # degrees that way with the hips at their limits (walk131_hard): a weaker pull
+                # holds it.
+                pose_term = None if self.pose_space is None else self.pose_space.system(
+                    state.angles, diag if V == 1 else s.pose_space_views * diag,
+                    self.layout(1)[2])
                 if pose_term is not None:
                     # damped like the data (Marquardt): where the image hardly measures an
                     # angle the pull alone would otherwise take it to the mean in one step

@@ -203,8 +203,10 @@ class PoseSpacePull:
     the limbs back to poses people make. It is part of the step's cost (a step must lower the
     image cost and the pull together) and scaled like the pull towards the prediction:
     ``weight`` times the median data curvature of the angles, negligible where the image
-    measures them (two views or more get none: :meth:`DifferentialTracker._step`; nor do
-    uncalibrated views: :meth:`DifferentialStepper.prepare`).
+    measures them. Two calibrated views or more get a fifth of it
+    (``Settings.pose_space_views``, :meth:`DifferentialTracker._step`): they measure the limbs'
+    depth, but a pelvis turned about the vertical with both hips turned back shows little in
+    any outline. Uncalibrated views get none (:meth:`DifferentialStepper.prepare`).
 
     Parameters
     ----------
