@@ -443,7 +443,9 @@ class BodyModel:
             for j in local:
                 T = T @ (E_one[where[0][j]][None] if same[j] else E_all[:, where[1][j]])
             T_chain.append(T)
-        T = np.stack([np.broadcast_to(T_chain[k], (n, 4, 4)) for k in pick], axis=1)
+        T = np.empty((n, len(pick), 4, 4))
+        for i, k in enumerate(pick):
+            T[:, i] = T_chain[k]
         return T[0] if single else T
 
     @staticmethod

@@ -268,7 +268,7 @@ class DifferentialTracker(Anchor, LimbRefit):
     # Per joint angle, the share of its last change carried into the prediction, or None:
     # ``settings.velocity`` for every angle.
     angle_carry = None
-    # One view: the pull towards the pose space learned from capture
+    # Calibrated views: the pull towards the pose space learned from capture
     # (:class:`stepper.PoseSpacePull`), or None; the take's stepper sets it.
     pose_space = None
 
@@ -665,9 +665,10 @@ class DifferentialTracker(Anchor, LimbRefit):
                 # axes, which their outlines hardly show), and a walker's pelvis drifted 30-40
                 # degrees that way with the hips at their limits (walk131_hard): a weaker pull
                 # holds it.
-                pose_term = None if self.pose_space is None else self.pose_space.system(
-                    state.angles, diag if V == 1 else s.pose_space_views * diag,
-                    self.layout(1)[2])
+                share = 1.0 if V == 1 else s.pose_space_views
+                pose_term = None if self.pose_space is None or share <= 0 else \
+                    self.pose_space.system(state.angles, share * diag if share != 1.0 else diag,
+                                           self.layout(V)[2])
                 if pose_term is not None:
                     # damped like the data (Marquardt): where the image hardly measures an
                     # angle the pull alone would otherwise take it to the mean in one step

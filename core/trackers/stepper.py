@@ -191,7 +191,7 @@ def learned_carry(body, fps, velocity):
 
 
 class PoseSpacePull:
-    """One view's pull of the differential tracker's angles towards the pose space learned
+    """The pull of the differential tracker's angles towards the pose space learned
     from capture (:class:`general.MotionModel`: the probabilistic PCA of captured poses).
 
     One view measures the limbs across its line of sight and leaves their depth free: a hip's
