@@ -667,8 +667,7 @@ class DifferentialTracker(Anchor, LimbRefit):
                 # holds it.
                 share = 1.0 if V == 1 else s.pose_space_views
                 pose_term = None if self.pose_space is None or share <= 0 else \
-                    self.pose_space.system(state.angles, share * diag if share != 1.0 else diag,
-                                           self.layout(V)[2])
+                    self.pose_space.system(state.angles, share * diag, self.layout(V)[2])
                 if pose_term is not None:
                     # damped like the data (Marquardt): where the image hardly measures an
                     # angle the pull alone would otherwise take it to the mean in one step
