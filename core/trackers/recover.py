@@ -9,7 +9,9 @@ differential step; this is the cheapest one that works from the plates themselve
 For each limb (each leg, each arm) in turn, with the rest of the body held, poses of the limb's
 joints are drawn around the current ones and scored on the foreground silhouettes of all views:
 points sampled inside the limb's primitives should project inside the foreground (by the signed
-distance), and into foreground that the rest of the body does not already explain. Drawing is
+distance), and into foreground that the rest of the body, or the limb's own first segment, do
+not already explain (a shank folded behind its thigh explains nothing the thigh does not). A knee is drawn within one frame's reach of where it is (``FLEX_SPEED_DEG_S``, at
+the take's frame rate: :meth:`LimbSearch.frame_rate`). Drawing is
 done in two rounds (wide, then narrow around the best). An arm that anything could call away
 is first drawn whole and broadly (:meth:`LimbSearch._broad`, unless ``LimbSearch.broad`` is
 off: the first of two tracking rounds): thousands of draws over its range scored on a few
@@ -75,6 +77,15 @@ END_BONUS = 0.6
 # in the views that know the colour) is searched whatever its silhouette says.
 END_SEEN = 0.3
 TRUNK_SEGMENTS = ("pelvis", "abdomen", "chest", "head")
+# How fast a joint's flexion can change (degrees per second): the search draws a limb's joints
+# within one frame's reach of where they are. A knee: the fastest of 80 CMU captures of 19
+# performers (karate kicks, runs, dance) flexed or straightened 60 degrees in a thirtieth of a
+# second (1800 degrees per second; 99.99 % of their frames under 50). Unbounded, a search took a
+# dancer's straight standing leg to a knee folded to its limit in one frame (dance05_hard, one
+# set of clicks: 12 -> 150 degrees, the ankle 0.87 m off for the rest of the take), the foot
+# hidden behind the thigh where every point of the shank lies inside the silhouettes. Elbows
+# are not bounded: an arm lost in front of the trunk is found again by broad draws.
+FLEX_SPEED_DEG_S = {"knee_flex": 2000.0}
 
 
 @dataclass
@@ -272,13 +283,81 @@ class LimbSearch:
         self.trunk = np.array([k for k, n in enumerate(body.segment_names)
                                if n in TRUNK_SEGMENTS], int)
         self._blocks = {}
+        self._chains = {}
         self._fit_at = None     # (roots, angles, sdfs, labels, scores) of the last search
+        # the most a DOF may change in one frame (radians): see FLEX_SPEED_DEG_S
+        self.reach = np.full(body.n_dofs, np.inf)
+        self._lower, self._upper = body.lower, body.upper
+
+    def frame_rate(self, fps):
+        """Bound the draws' joints to one frame's reach at ``fps`` (FLEX_SPEED_DEG_S)."""
+        self.reach = np.full(self.body.n_dofs, np.inf)
+        if fps and fps > 0:
+            for k, name in enumerate(self.body.dof_names):
+                speed = FLEX_SPEED_DEG_S.get(name[2:] if name[:2] in ("l_", "r_") else name)
+                if speed is not None:
+                    self.reach[k] = np.radians(speed) / fps
+
+    def _clamp(self, angles):
+        """Draws clipped to the joint limits and to one frame's reach of the searched pose."""
+        return np.clip(angles, self._lower, self._upper)
 
     def reseed(self, key=()):
         """Restart the draws from a seed made of the search's own and ``key`` (non-negative
         ints, e.g. a tracking pass's first and last frame), so a pass draws the same samples
         whatever ran before it."""
         self.rng = np.random.default_rng([self.seed, *(int(k) for k in key)])
+
+    def _chain(self, key):
+        """The segments ``key`` of one limb with the limb's segments before them (root first)
+        for :meth:`score`: the chain's segments (whose transforms place the points), the main
+        ellipsoid of its first (centre and half-axis in the segment's frame, radius) and the
+        position of each of ``key`` in the chain. None for segments outside the limbs."""
+        if key not in self._chains:
+            limb = next((g.segments for g in self.groups if key[0] in g.segments), None)
+            chain = None
+            if limb is not None and set(key) <= set(int(k) for k in limb):
+                order = [int(k) for k in limb]
+                segs = tuple(order[:max(order.index(k) for k in key) + 1])
+                prims = self.prims
+                mine = np.flatnonzero(prims.segment == segs[0])
+                q = mine[np.argmax(np.prod(prims.size[mine], axis=1))]
+                T, size = prims.prim2seg[q], prims.size[q]
+                first = (T[:3, 3].copy(), T[:3, 2] * size[2], float(max(size[0], size[1])))
+                chain = segs, first, [segs.index(k) for k in key]
+            self._chains[key] = chain
+        return self._chains[key]
+
+    def _own_cover(self, first, T, uv, cam, ranges):
+        """Which points (N, M) of a limb's draws fall, in one view, on the limb's first
+        segment (a thigh, an upper arm: inside its main ellipsoid's outline, approximated
+        about its axis): foreground the limb explains twice, credited as foreground the rest
+        of the body covers (``SHARED_CREDIT``). A leg folded so that the shank lies behind the
+        thigh would otherwise score every point of both as well as a leg that covers its own
+        pixels. ``first`` is the first segment's ellipsoid (:meth:`_chain`), ``T`` (N, S, 4,
+        4) the chain's transforms, ``ranges`` the points' (position in the chain, first index,
+        last + 1)."""
+        out = np.zeros(uv.shape[:2], bool)
+        outer = [(lo, hi) for pos, lo, hi in ranges if pos > 0 and hi > lo]
+        if not outer or not hasattr(cam, "K"):
+            return out
+        centre, half, radius = first
+        R, t = T[:, 0, :3, :3], T[:, 0, :3, 3]
+        ends = np.stack([R @ (centre - half) + t, R @ (centre + half) + t], axis=1)
+        e = cam.project(ends.reshape(-1, 3)).reshape(-1, 2, 2)               # (N, 2, 2)
+        depth = np.maximum(cam.depth(ends), 1e-6)                           # (N, 2)
+        width2 = (radius * float(cam.K[0, 0]) / depth.mean(axis=1)) ** 2    # (N,) pixels^2
+        d = e[:, 1] - e[:, 0]
+        dd = np.maximum((d * d).sum(axis=1), 1e-9)[:, None]
+        for lo, hi in outer:
+            px = uv[:, lo:hi, 0] - e[:, None, 0, 0]
+            py = uv[:, lo:hi, 1] - e[:, None, 0, 1]
+            along = px * d[:, None, 0] + py * d[:, None, 1]                  # a * dd
+            # off the axis squared (|p|^2 - a^2 dd) under the outline's half-width squared at
+            # a (0..1 along the axis, an ellipse's: width^2 * 4 a (1 - a)), times dd^2 > 0
+            out[:, lo:hi] = ((px * px + py * py) * dd - along * along) * dd \
+                < 4.0 * width2[:, None] * along * (dd - along)
+        return out
 
     def score(self, roots, angles, segments, cameras, sdfs, rest, unexplained=None,
               plain=False, colour=None, sparse=False):
@@ -329,6 +408,12 @@ class LimbSearch:
                 (i, self.points[(self.point_segment == k) & use],
                  self.point_prim[(self.point_segment == k) & use]) for i, k in enumerate(key)]
         m = sum(len(pts) for _, pts, _ in blocks)
+        chain = self._chain(key)
+        if chain is not None:
+            ranges, lo = [], 0
+            for (i, pts, _), pos in zip(blocks, chain[2]):
+                ranges.append((pos, lo, lo + len(pts)))
+                lo += len(pts)
         end = None
         if colour is not None and any(x is not None for x in colour[1]):
             end = np.concatenate([p == colour[0] for _, _, p in blocks])
@@ -343,11 +428,13 @@ class LimbSearch:
                 continue
             if T is None or not np.array_equal(roots[c], roots[c - 1]):
                 # only the limb's chain moves its points
-                T = self.body.seg2world_of(roots[c][None], angles, key)
+                T = self.body.seg2world_of(roots[c][None], angles,
+                                           key if chain is None else chain[0])
                 X = np.empty((n, m, 3))
                 lo = 0
                 for i, pts, _ in blocks:
-                    _transform_points(T[:, i], pts, X[:, lo:lo + len(pts)])
+                    _transform_points(T[:, i if chain is None else chain[2][i]], pts,
+                                      X[:, lo:lo + len(pts)])
                     lo += len(pts)
             uv = cam.project(X.reshape(-1, 3)).reshape(n, -1, 2)
             h, w = sdfs[c].shape
@@ -361,11 +448,17 @@ class LimbSearch:
             s /= -SDF_SCALE
             np.clip(s, -1.0, 1.0, out=s)
             s[off] = -1.0
+            shared = None
             if rest is not None and rest[c] is not None:
                 covered = rest[c].flat_take(flat) if isinstance(rest[c], _RestOfBody) \
                     else np.take(rest[c], flat)
                 shared = s > 0
                 shared &= covered
+            if chain is not None and len(chain[0]) > 1:
+                own = self._own_cover(chain[1], T, uv, cam, ranges)
+                shared = own if shared is None else shared | own
+                shared &= s > 0
+            if shared is not None:
                 s[shared] *= SHARED_CREDIT
             if plain:
                 total_plain += s.mean(axis=1)
@@ -546,7 +639,7 @@ class LimbSearch:
         (on all points)."""
         dofs = group.dofs
         trial = np.repeat(angles[None], BROAD_DRAWS, axis=0)
-        trial[1:, dofs] = self.rng.uniform(self.body.lower[dofs], self.body.upper[dofs],
+        trial[1:, dofs] = self.rng.uniform(self._lower[dofs], self._upper[dofs],
                                            size=(BROAD_DRAWS - 1, len(dofs)))
         s = self.score(roots, trial, group.segments, cameras, sdfs, rest, unexplained,
                        colour=colour, sparse=True)
@@ -560,7 +653,7 @@ class LimbSearch:
             top = top[-keep:]
             near = np.repeat(top, BROAD_LOCAL, axis=0)
             near[:, dofs] += self.rng.normal(size=(len(near), len(dofs))) * width
-            top = self.body.clamp(np.concatenate([top, near]))
+            top = self._clamp(np.concatenate([top, near]))
             full = self.score(roots, top, group.segments, cameras, sdfs, rest, unexplained,
                               colour=colour)
             if colour is not None:
@@ -574,7 +667,10 @@ class LimbSearch:
         """Best pose of one limb and the score it gains; ``plain_scores`` (dict), if given,
         gets the limb's score at ``angles`` without the credit for unexplained foreground.
         With the ``colour`` of its end (:meth:`score`) every stage is scored on the whole limb,
-        whose end each stage moves."""
+        whose end each stage moves. Draws stay within one frame's reach (``reach``) of
+        ``angles``."""
+        self._lower = np.maximum(self.body.lower, angles - self.reach)
+        self._upper = np.minimum(self.body.upper, angles + self.reach)
         if not group.name.endswith(self.attract):
             unexplained = [None] * len(unexplained)
         current, current_plain = self.score(roots, angles[None], group.segments, cameras, sdfs,
@@ -614,14 +710,14 @@ class LimbSearch:
             # The limb fits; only unexplained foreground could call it away. A cheap probe
             # (few draws, the whole limb at once) decides whether a full search is worth it.
             probe = np.repeat(angles[None], PROBE_DRAWS, axis=0)
-            probe[1:, group.dofs] = self.rng.uniform(self.body.lower[group.dofs],
-                                                     self.body.upper[group.dofs],
+            probe[1:, group.dofs] = self.rng.uniform(self._lower[group.dofs],
+                                                     self._upper[group.dofs],
                                                      size=(PROBE_DRAWS - 1, len(group.dofs)))
             gain = self.score(roots, probe, group.segments, cameras, sdfs, rest, unexplained,
                               colour=colour).max() - current
             if gain < 0.5 * self.margin:
                 return angles, 0.0
-        lower, upper = self.body.lower, self.body.upper
+        lower, upper = self._lower, self._upper
         # Each stage: half the draws uniform over the joints' range, half around the current
         # pose; then a narrower round around the stage's best.
         for dofs, segs in group.stages:
@@ -638,7 +734,7 @@ class LimbSearch:
                     half = self.draws // 2
                     trial[half:, dofs] = self.rng.uniform(lower[dofs], upper[dofs],
                                                           size=(self.draws - half, len(dofs)))
-                trial = self.body.clamp(trial)
+                trial = self._clamp(trial)
                 s = self.score(roots, trial, segs, cameras, sdfs, rest, unexplained,
                                colour=colour)
                 if colour is not None:

@@ -116,6 +116,7 @@ class DifferentialStepper(Stepper):
 
     def prepare(self, body, calibrated, fps):
         self.tracker = DifferentialTracker(body, calibrated, self.settings)
+        self.tracker.search.frame_rate(fps)
         if calibrated and self.settings.learned_carry:
             self.tracker.angle_carry, self.tracker.root_carry = learned_carry(
                 body, fps, self.settings.velocity)

@@ -239,6 +239,35 @@ def test_step_recovers_a_kick_only_with_the_search(body, cams, search):
         assert err > 150
 
 
+def reference_own_cover(search, root, angles, seg, pts, cam, uv):
+    """Which points (N, M) fall on the first segment of their own limb, the plain way: its
+    largest ellipsoid posed with the whole body, its axis projected, the point inside the
+    outline's half-width about it (the ellipse's profile along the axis)."""
+    body, prims = search.body, search.prims
+    T = body.seg2world(np.repeat(root[None], len(angles), axis=0), angles)     # (N, S, 4, 4)
+    out = np.zeros(uv.shape[:2], bool)
+    for group in limb_groups(body):
+        order = [int(k) for k in group.segments]
+        for i in range(len(seg)):
+            if seg[i] not in order:
+                continue
+            for j in order[:min(order.index(seg[i]), 1)]:
+                mine = np.flatnonzero(prims.segment == j)
+                q = mine[np.argmax([np.prod(prims.size[p]) for p in mine])]
+                half = prims.prim2seg[q][:3, 2] * prims.size[q][2]
+                centre = prims.prim2seg[q][:3, 3]
+                radius = max(prims.size[q][0], prims.size[q][1])
+                a_w = np.einsum("nij,j->ni", T[:, j, :3, :3], centre - half) + T[:, j, :3, 3]
+                b_w = np.einsum("nij,j->ni", T[:, j, :3, :3], centre + half) + T[:, j, :3, 3]
+                a_i, b_i = cam.project(a_w), cam.project(b_w)
+                width = radius * cam.K[0, 0] / ((cam.depth(a_w) + cam.depth(b_w)) / 2)
+                d = b_i - a_i
+                along = np.sum((uv[:, i] - a_i) * d, axis=1) / np.maximum(np.sum(d * d, 1), 1e-9)
+                off_axis = np.linalg.norm(uv[:, i] - (a_i + along[:, None] * d), axis=1)
+                out[:, i] |= off_axis ** 2 < width ** 2 * np.maximum(1 - (2 * along - 1) ** 2, 0)
+    return out
+
+
 def reference_score(search, roots, angles, segments, cameras, sdfs, rest, unexplained=None):
     """LimbSearch.score the plain way: the whole body posed, the limb's points picked."""
     from zoopraxis.core.trackers import recover as rc
@@ -257,8 +286,10 @@ def reference_score(search, roots, angles, segments, cameras, sdfs, rest, unexpl
         v = np.clip(np.rint(uv[..., 1]), 0, h - 1).astype(int)
         off = (uv[..., 0] < 0) | (uv[..., 0] > w - 1) | (uv[..., 1] < 0) | (uv[..., 1] > h - 1)
         s = np.where(off, -1.0, np.clip(-sdfs[c][v, u] / rc.SDF_SCALE, -1.0, 1.0))
+        covered = reference_own_cover(search, roots[c], angles, seg, pts, cam, uv)
         if rest is not None and rest[c] is not None:
-            s = np.where((s > 0) & rest[c][v, u], rc.SHARED_CREDIT * s, s)
+            covered = covered | rest[c][v, u]
+        s = np.where((s > 0) & covered, rc.SHARED_CREDIT * s, s)
         if unexplained is not None and unexplained[c] is not None:
             s = s + rc.UNEXPLAINED_BONUS * (unexplained[c][v, u] & ~off)
         total += s.mean(axis=1)
@@ -396,3 +427,57 @@ def test_a_moved_limb_is_kept_only_if_it_still_looks_like_itself(body, cams, mon
     else:
         assert report.recovered == ["left leg", "right arm"]
         assert err[wrist] > 150
+
+
+def test_a_leg_folded_behind_its_thigh_scores_below_one_that_covers_its_pixels(body, cams,
+                                                                              monkeypatch):
+    """Foreground a limb explains twice counts as foreground the rest of the body covers: in
+    a silhouette that holds a straight leg and the same leg folded at the knee's limit, every
+    point of either lies inside, but the folded shank lies on its own thigh in every view."""
+    from zoopraxis.core.trackers import recover as rc
+
+    p0 = body.rest_pose(se3.transform(p=[0, 0, 0.95]))
+    folded = p0.copy()
+    knee = body.dof_index("l_knee_flex")
+    folded.angles[knee] = body.upper[knee]
+    sdfs = [signed_distance((a >= 0) | (b >= 0)) for a, b in
+            zip(silhouettes(body, p0, cams), silhouettes(body, folded, cams))]
+    leg = next(g for g in limb_groups(body) if g.name == "left leg")
+    roots = np.stack([p0.root] * len(cams))
+    angles = np.stack([p0.angles, folded.angles])
+    straight, fold = LimbSearch(body).score(roots, angles, leg.segments, cams, sdfs, None)
+    assert straight > 0.85
+    assert straight - fold > 0.05
+    # credited in full, the folded leg scores better (0.95 against 0.92: its points lie
+    # deeper inside the silhouettes): the difference is the foreground explained twice
+    monkeypatch.setattr(rc, "SHARED_CREDIT", 1.0)
+    straight, fold = LimbSearch(body).score(roots, angles, leg.segments, cams, sdfs, None)
+    assert fold > straight
+
+
+def test_the_search_moves_a_knee_no_faster_than_knees_move(body, cams):
+    """At a known frame rate the search draws a knee within one frame's reach of where it
+    is (FLEX_SPEED_DEG_S): a leg kicked back, its knee bent 126 degrees, is found without a
+    frame rate; at 30 frames a second the knee bends at most 67 degrees."""
+    from zoopraxis.core.trackers.recover import FLEX_SPEED_DEG_S
+
+    p0 = body.rest_pose(se3.transform(p=[0, 0, 0.95]))
+    p1 = p0.copy()
+    knee = body.dof_index("l_knee_flex")
+    p1.angles[body.dof_index("l_hip_flex")] = -0.3
+    p1.angles[knee] = 2.2
+    sdfs = [signed_distance(lab >= 0) for lab in silhouettes(body, p1, cams)]
+    labels0 = silhouettes(body, p0, cams)
+    state = D.State(np.stack([p0.root] * 3), p0.angles.copy(), list(cams))
+    free, _ = LimbSearch(body, seed=3).search(state, sdfs, labels0)
+    bounded_search = LimbSearch(body, seed=3)
+    bounded_search.frame_rate(30.0)
+    bounded, moved = bounded_search.search(state, sdfs, labels0)
+    reach = np.radians(FLEX_SPEED_DEG_S["knee_flex"]) / 30.0
+    assert abs(free[knee] - p1.angles[knee]) < 0.35
+    assert [name for name, _ in moved] == ["left leg"]
+    assert abs(free[knee] - p0.angles[knee]) > reach
+    assert abs(bounded[knee] - p0.angles[knee]) <= reach + 1e-12
+    # the other DOFs are not bounded
+    assert np.isinf(bounded_search.reach[body.dof_index("l_hip_flex")])
+
