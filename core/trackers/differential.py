@@ -110,6 +110,9 @@ class State:
     roots: np.ndarray        # (V, 4, 4)
     angles: np.ndarray       # (n_dofs,)
     cameras: list            # per view, at working resolution
+    # DOFs the limb search corrected at this frame: their change from the frame before is
+    # the estimate's correction, not the body's motion, and is not carried on (``predict``)
+    corrected: np.ndarray = None
 
     def copy(self):
         return State(self.roots.copy(), self.angles.copy(), list(self.cameras))
@@ -275,13 +278,17 @@ class DifferentialTracker(Anchor, LimbRefit):
     def predict(self, state, previous=None):
         """Constant-velocity prediction, damped by ``settings.velocity`` (per angle by
         :attr:`angle_carry` where that is set), and the pelvis's by :attr:`root_carry` where
-        that is set (calibrated views: it moves in world axes)."""
+        that is set (calibrated views: it moves in world axes). The angles the limb search
+        corrected at ``state`` (``State.corrected``) are not carried on."""
         if previous is None or self.settings.velocity == 0:
             return state.copy()
         k = self.settings.velocity
         carry = k if self.angle_carry is None else np.asarray(self.angle_carry, float)
         new = state.copy()
-        new.angles = self.body.clamp(state.angles + carry * (state.angles - previous.angles))
+        velocity = state.angles - previous.angles
+        if state.corrected is not None:
+            velocity[state.corrected] = 0.0
+        new.angles = self.body.clamp(state.angles + carry * velocity)
         if self.root_carry is not None and self.calibrated:
             carry = np.asarray(self.root_carry, float)
             root, before = state.roots[0], previous.roots[0]

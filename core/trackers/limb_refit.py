@@ -339,6 +339,8 @@ class LimbRefit:
                 < (1 + self.settings.refit_tolerance)
                 * self.frame_cost(state, state_t, images_t1, renders_t, flow, segments)):
             report2.recovered = kept
+            # the moved limbs' change is a correction, not motion to carry into the next frame
+            state2.corrected = np.concatenate([groups[name].dofs for name in kept])
             return state2, report2
         return None
 

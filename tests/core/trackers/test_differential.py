@@ -310,6 +310,14 @@ def test_prediction_extrapolates_motion(body):
     pred = tracker.predict(s1, s0)
     expected = body.clamp(p1.angles + 0.5 * (p1.angles - p0.angles))
     assert np.allclose(pred.angles, expected)
+    # angles the limb search corrected at s1 are held where they are; the rest carried on
+    moved = np.flatnonzero(p1.angles != p0.angles)
+    assert len(moved) >= 2
+    s1.corrected = moved[:1]
+    pred = tracker.predict(s1, s0)
+    assert pred.angles[moved[0]] == p1.angles[moved[0]]
+    assert np.allclose(np.delete(pred.angles, moved[:1]), np.delete(expected, moved[:1]))
+    assert pred.corrected is None       # a prediction corrects nothing
 
 
 def test_median_equals_numpy():

@@ -233,7 +233,13 @@ def test_step_recovers_a_kick_only_with_the_search(body, cams, search):
     if search:
         assert report.recovered == ["left leg"]
         assert err < 40
+        # the leg's jump is a correction: the next frame's prediction does not carry it on
+        leg = next(g for g in limb_groups(body) if g.name == "left leg")
+        assert sorted(state1.corrected) == sorted(leg.dofs)
+        ahead = tracker.predict(state1, state0)
+        assert np.array_equal(ahead.angles[leg.dofs], state1.angles[leg.dofs])
     else:
+        assert state1.corrected is None
         # the kick is beyond the image-motion step's reach: this is what the search is for
         assert report.recovered == []
         assert err > 150
