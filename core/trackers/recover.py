@@ -10,9 +10,9 @@ For each limb (each leg, each arm) in turn, with the rest of the body held, pose
 joints are drawn around the current ones and scored on the foreground silhouettes of all views:
 points sampled inside the limb's primitives should project inside the foreground (by the signed
 distance), and into foreground that the rest of the body, or the limb's own first segment, do
-not already explain (a shank folded behind its thigh explains nothing the thigh does not). A knee is drawn within one frame's reach of where it is (``FLEX_SPEED_DEG_S``, at
-the take's frame rate: :meth:`LimbSearch.frame_rate`). Drawing is
-done in two rounds (wide, then narrow around the best). An arm that anything could call away
+not already explain (a shank folded behind its thigh explains nothing the thigh does not). A
+knee is drawn within one frame's reach of where the step left it (``FLEX_SPEED_DEG_S``, at
+the take's frame rate: :meth:`LimbSearch.frame_rate`). Drawing is done in two rounds (wide, then narrow around the best). An arm that anything could call away
 is first drawn whole and broadly (:meth:`LimbSearch._broad`, unless ``LimbSearch.broad`` is
 off: the first of two tracking rounds): thousands of draws over its range scored on a few
 points each, the best refined on all of them; its stages start from there. Everything is
@@ -36,7 +36,8 @@ WIDTHS = {"hip": 0.5, "knee": 0.7, "ankle": 0.3, "shoulder": 0.6, "elbow": 0.7}
 POINTS_PER_PRIMITIVE = 48
 SHRINK = 0.6            # points lie this far out towards the surface (robust to other builds)
 SDF_SCALE = 3.0         # pixels of signed distance for a full +-1 score
-SHARED_CREDIT = 0.4     # credit for foreground that the rest of the body already covers
+# credit for foreground that the rest of the body, or the limb's own first segment, covers
+SHARED_CREDIT = 0.4
 # Search a limb scoring below this. A leg that fits scores 0.75-1; one left behind by a kick
 # with its thigh still in place scores 0.3-0.6 (measured on bench_track's walk3, where such a
 # leg stayed 0.5 m off for 70 frames under a lower threshold). An arm in front of or behind
@@ -78,7 +79,8 @@ END_BONUS = 0.6
 END_SEEN = 0.3
 TRUNK_SEGMENTS = ("pelvis", "abdomen", "chest", "head")
 # How fast a joint's flexion can change (degrees per second): the search draws a limb's joints
-# within one frame's reach of where they are. A knee: the fastest of 80 CMU captures of 19
+# within one frame's reach of where the step left them (the step and the refit after a move
+# are not bounded). A knee: the fastest of 80 CMU captures of 19
 # performers (karate kicks, runs, dance) flexed or straightened 60 degrees in a thirtieth of a
 # second (1800 degrees per second; 99.99 % of their frames under 50). Unbounded, a search took a
 # dancer's straight standing leg to a knee folded to its limit in one frame (dance05_hard, one
@@ -292,6 +294,7 @@ class LimbSearch:
     def frame_rate(self, fps):
         """Bound the draws' joints to one frame's reach at ``fps`` (FLEX_SPEED_DEG_S)."""
         self.reach = np.full(self.body.n_dofs, np.inf)
+        self._lower, self._upper = self.body.lower, self.body.upper
         if fps and fps > 0:
             for k, name in enumerate(self.body.dof_names):
                 speed = FLEX_SPEED_DEG_S.get(name[2:] if name[:2] in ("l_", "r_") else name)
@@ -311,8 +314,9 @@ class LimbSearch:
     def _chain(self, key):
         """The segments ``key`` of one limb with the limb's segments before them (root first)
         for :meth:`score`: the chain's segments (whose transforms place the points), the main
-        ellipsoid of its first (centre and half-axis in the segment's frame, radius) and the
-        position of each of ``key`` in the chain. None for segments outside the limbs."""
+        primitive of its first (centre and half-axis in the segment's frame, radius, and
+        whether it is a cylinder) and the position of each of ``key`` in the chain. None for
+        segments outside the limbs."""
         if key not in self._chains:
             limb = next((g.segments for g in self.groups if key[0] in g.segments), None)
             chain = None
@@ -323,15 +327,22 @@ class LimbSearch:
                 mine = np.flatnonzero(prims.segment == segs[0])
                 q = mine[np.argmax(np.prod(prims.size[mine], axis=1))]
                 T, size = prims.prim2seg[q], prims.size[q]
-                first = (T[:3, 3].copy(), T[:3, 2] * size[2], float(max(size[0], size[1])))
+                if prims.kind[q] == CYLINDER:
+                    # from its base (the frame's origin) along +z, tapered at the top
+                    half = T[:3, 2] * size[2] / 2
+                    first = (T[:3, 3] + half, half,
+                             float(max(size[0], size[1]) * max(1.0, prims.taper[q])), True)
+                else:
+                    first = (T[:3, 3].copy(), T[:3, 2] * size[2],
+                             float(max(size[0], size[1])), False)
                 chain = segs, first, [segs.index(k) for k in key]
             self._chains[key] = chain
         return self._chains[key]
 
     def _own_cover(self, first, T, uv, cam, ranges):
         """Which points (N, M) of a limb's draws fall, in one view, on the limb's first
-        segment (a thigh, an upper arm: inside its main ellipsoid's outline, approximated
-        about its axis): foreground the limb explains twice, credited as foreground the rest
+        segment (a thigh, an upper arm: inside its main primitive's outline about its
+        projected axis, an ellipse's profile or a cylinder's band): foreground the limb explains twice, credited as foreground the rest
         of the body covers (``SHARED_CREDIT``). A leg folded so that the shank lies behind the
         thigh would otherwise score every point of both as well as a leg that covers its own
         pixels. ``first`` is the first segment's ellipsoid (:meth:`_chain`), ``T`` (N, S, 4,
@@ -341,7 +352,7 @@ class LimbSearch:
         outer = [(lo, hi) for pos, lo, hi in ranges if pos > 0 and hi > lo]
         if not outer or not hasattr(cam, "K"):
             return out
-        centre, half, radius = first
+        centre, half, radius, cylinder = first
         R, t = T[:, 0, :3, :3], T[:, 0, :3, 3]
         ends = np.stack([R @ (centre - half) + t, R @ (centre + half) + t], axis=1)
         e = cam.project(ends.reshape(-1, 3)).reshape(-1, 2, 2)               # (N, 2, 2)
@@ -353,10 +364,14 @@ class LimbSearch:
             px = uv[:, lo:hi, 0] - e[:, None, 0, 0]
             py = uv[:, lo:hi, 1] - e[:, None, 0, 1]
             along = px * d[:, None, 0] + py * d[:, None, 1]                  # a * dd
-            # off the axis squared (|p|^2 - a^2 dd) under the outline's half-width squared at
-            # a (0..1 along the axis, an ellipse's: width^2 * 4 a (1 - a)), times dd^2 > 0
-            out[:, lo:hi] = ((px * px + py * py) * dd - along * along) * dd \
-                < 4.0 * width2[:, None] * along * (dd - along)
+            # off the axis squared (|p|^2 - a^2 dd), times dd^2 > 0, under the outline's
+            # half-width squared at a (0..1 along the axis): an ellipse's width^2 4 a (1 - a),
+            # a cylinder's width^2 between its ends
+            off = ((px * px + py * py) * dd - along * along) * dd
+            if cylinder:
+                out[:, lo:hi] = (off < width2[:, None] * dd * dd) & (along >= 0) & (along <= dd)
+            else:
+                out[:, lo:hi] = off < 4.0 * width2[:, None] * along * (dd - along)
         return out
 
     def score(self, roots, angles, segments, cameras, sdfs, rest, unexplained=None,
@@ -374,7 +389,8 @@ class LimbSearch:
         sdfs : list of array (H, W) or None
             Signed distance to the foreground (negative inside) per view; None skips a view.
         rest : list of array of bool (H, W) or None
-            Pixels the rest of the body covers.
+            Pixels the rest of the body covers (the limb's own first segment, where its
+            outer segments' points fall on it, counts alike: :meth:`_own_cover`).
         unexplained : list of array of bool (H, W) or None, optional
             Foreground that no part of the model covers (thick blobs only): where a limb
             left behind has gone.
@@ -718,8 +734,8 @@ class LimbSearch:
             if gain < 0.5 * self.margin:
                 return angles, 0.0
         lower, upper = self._lower, self._upper
-        # Each stage: half the draws uniform over the joints' range, half around the current
-        # pose; then a narrower round around the stage's best.
+        # Each stage: half the draws uniform over the joints' range (within one frame's
+        # reach), half around the current pose; then a narrower round around the stage's best.
         for dofs, segs in group.stages:
             if colour is not None:
                 segs = group.segments

@@ -247,8 +247,11 @@ def test_step_recovers_a_kick_only_with_the_search(body, cams, search):
 
 def reference_own_cover(search, root, angles, seg, pts, cam, uv):
     """Which points (N, M) fall on the first segment of their own limb, the plain way: its
-    largest ellipsoid posed with the whole body, its axis projected, the point inside the
-    outline's half-width about it (the ellipse's profile along the axis)."""
+    largest primitive posed with the whole body, its axis projected, the point inside the
+    outline's half-width about it (an ellipsoid's profile along the axis, a cylinder's band
+    from its base to its top)."""
+    from zoopraxis.core.body.primitives import CYLINDER
+
     body, prims = search.body, search.prims
     T = body.seg2world(np.repeat(root[None], len(angles), axis=0), angles)     # (N, S, 4, 4)
     out = np.zeros(uv.shape[:2], bool)
@@ -260,17 +263,27 @@ def reference_own_cover(search, root, angles, seg, pts, cam, uv):
             for j in order[:min(order.index(seg[i]), 1)]:
                 mine = np.flatnonzero(prims.segment == j)
                 q = mine[np.argmax([np.prod(prims.size[p]) for p in mine])]
-                half = prims.prim2seg[q][:3, 2] * prims.size[q][2]
-                centre = prims.prim2seg[q][:3, 3]
+                axis = prims.prim2seg[q][:3, 2] * prims.size[q][2]
+                origin = prims.prim2seg[q][:3, 3]
                 radius = max(prims.size[q][0], prims.size[q][1])
-                a_w = np.einsum("nij,j->ni", T[:, j, :3, :3], centre - half) + T[:, j, :3, 3]
-                b_w = np.einsum("nij,j->ni", T[:, j, :3, :3], centre + half) + T[:, j, :3, 3]
+                cylinder = prims.kind[q] == CYLINDER
+                if cylinder:
+                    bottom, top = origin, origin + axis
+                    radius *= max(1.0, prims.taper[q])
+                else:
+                    bottom, top = origin - axis, origin + axis
+                a_w = np.einsum("nij,j->ni", T[:, j, :3, :3], bottom) + T[:, j, :3, 3]
+                b_w = np.einsum("nij,j->ni", T[:, j, :3, :3], top) + T[:, j, :3, 3]
                 a_i, b_i = cam.project(a_w), cam.project(b_w)
                 width = radius * cam.K[0, 0] / ((cam.depth(a_w) + cam.depth(b_w)) / 2)
                 d = b_i - a_i
                 along = np.sum((uv[:, i] - a_i) * d, axis=1) / np.maximum(np.sum(d * d, 1), 1e-9)
                 off_axis = np.linalg.norm(uv[:, i] - (a_i + along[:, None] * d), axis=1)
-                out[:, i] |= off_axis ** 2 < width ** 2 * np.maximum(1 - (2 * along - 1) ** 2, 0)
+                if cylinder:
+                    out[:, i] |= (off_axis < width) & (along >= 0) & (along <= 1)
+                else:
+                    out[:, i] |= off_axis ** 2 < width ** 2 * np.maximum(1 - (2 * along - 1) ** 2,
+                                                                         0)
     return out
 
 
@@ -303,8 +316,13 @@ def reference_score(search, roots, angles, segments, cameras, sdfs, rest, unexpl
     return total / max(used, 1)
 
 
-def test_score_equals_the_whole_body_reference(body, cams, rng):
+@pytest.mark.parametrize("template", ["full", "sidenbladh"])
+def test_score_equals_the_whole_body_reference(template, cams, rng):
+    """The search's score, limb chain by limb chain, equals the plain whole-body computation;
+    on ellipsoid limbs (full) and cylinder ones (sidenbladh)."""
     from zoopraxis.core.trackers.recover import _rest_of_body, unexplained_foreground
+
+    body = make_body(template)
 
     p0, p1 = kicked(body)
     labels0 = silhouettes(body, p0, cams)
@@ -487,3 +505,16 @@ def test_the_search_moves_a_knee_no_faster_than_knees_move(body, cams):
     # the other DOFs are not bounded
     assert np.isinf(bounded_search.reach[body.dof_index("l_hip_flex")])
 
+
+def test_the_differential_stepper_bounds_the_search_at_the_takes_frame_rate(body):
+    """The tracker a take gets searches knees within one frame's reach at the take's rate."""
+    from zoopraxis.core.trackers.recover import FLEX_SPEED_DEG_S
+    from zoopraxis.core.trackers.stepper import DifferentialStepper
+
+    knee = body.dof_index("l_knee_flex")
+    reach = DifferentialStepper().prepare(body, True, 25.0).search.reach
+    assert reach[knee] == pytest.approx(np.radians(FLEX_SPEED_DEG_S["knee_flex"]) / 25.0)
+    assert np.isfinite(reach).sum() == 2           # the two knees
+    search = LimbSearch(body)
+    search.frame_rate(None)          # no rate known: no bound
+    assert np.isinf(search.reach).all()
