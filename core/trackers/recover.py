@@ -12,9 +12,10 @@ points sampled inside the limb's primitives should project inside the foreground
 distance), and into foreground that the rest of the body, or the limb's own first segment, do
 not already explain (a shank folded behind its thigh explains nothing the thigh does not). A
 knee is drawn within one frame's reach of where the step left it (``FLEX_SPEED_DEG_S``, at
-the take's frame rate: :meth:`LimbSearch.frame_rate`). Drawing is done in two rounds (wide, then narrow around the best). An arm that anything could call away
-is first drawn whole and broadly (:meth:`LimbSearch._broad`, unless ``LimbSearch.broad`` is
-off: the first of two tracking rounds): thousands of draws over its range scored on a few
+the take's frame rate: :meth:`LimbSearch.frame_rate`). Drawing is done in two rounds (wide,
+then narrow around the best). An arm that anything could call away is first drawn whole and
+broadly (:meth:`LimbSearch._broad`, unless ``LimbSearch.broad`` is off: the first of two
+tracking rounds): thousands of draws over its range scored on a few
 points each, the best refined on all of them; its stages start from there. Everything is
 vectorized over draws and points. When a limb's best draw clearly beats its current pose, the
 tracker refines from it (:meth:`DifferentialTracker.step` with ``start``).
@@ -289,21 +290,20 @@ class LimbSearch:
         self._fit_at = None     # (roots, angles, sdfs, labels, scores) of the last search
         # the most a DOF may change in one frame (radians): see FLEX_SPEED_DEG_S
         self.reach = np.full(body.n_dofs, np.inf)
-        self._lower, self._upper = body.lower, body.upper
 
     def frame_rate(self, fps):
         """Bound the draws' joints to one frame's reach at ``fps`` (FLEX_SPEED_DEG_S)."""
         self.reach = np.full(self.body.n_dofs, np.inf)
-        self._lower, self._upper = self.body.lower, self.body.upper
         if fps and fps > 0:
             for k, name in enumerate(self.body.dof_names):
                 speed = FLEX_SPEED_DEG_S.get(name[2:] if name[:2] in ("l_", "r_") else name)
                 if speed is not None:
                     self.reach[k] = np.radians(speed) / fps
 
-    def _clamp(self, angles):
-        """Draws clipped to the joint limits and to one frame's reach of the searched pose."""
-        return np.clip(angles, self._lower, self._upper)
+    def _bounds(self, angles):
+        """Where draws from ``angles`` may go: the joint limits within one frame's reach."""
+        return (np.maximum(self.body.lower, angles - self.reach),
+                np.minimum(self.body.upper, angles + self.reach))
 
     def reseed(self, key=()):
         """Restart the draws from a seed made of the search's own and ``key`` (non-negative
@@ -342,12 +342,12 @@ class LimbSearch:
     def _own_cover(self, first, T, uv, cam, ranges):
         """Which points (N, M) of a limb's draws fall, in one view, on the limb's first
         segment (a thigh, an upper arm: inside its main primitive's outline about its
-        projected axis, an ellipse's profile or a cylinder's band): foreground the limb explains twice, credited as foreground the rest
-        of the body covers (``SHARED_CREDIT``). A leg folded so that the shank lies behind the
-        thigh would otherwise score every point of both as well as a leg that covers its own
-        pixels. ``first`` is the first segment's ellipsoid (:meth:`_chain`), ``T`` (N, S, 4,
-        4) the chain's transforms, ``ranges`` the points' (position in the chain, first index,
-        last + 1)."""
+        projected axis, an ellipse's profile or a cylinder's band): foreground the limb
+        explains twice, credited as foreground the rest of the body covers (``SHARED_CREDIT``).
+        A leg folded so that the shank lies behind the thigh would otherwise score every point
+        of both as well as a leg that covers its own pixels. ``first`` is the first segment's
+        main primitive (:meth:`_chain`), ``T`` (N, S, 4, 4) the chain's transforms, ``ranges``
+        the points' (position in the chain, first index, last + 1)."""
         out = np.zeros(uv.shape[:2], bool)
         outer = [(lo, hi) for pos, lo, hi in ranges if pos > 0 and hi > lo]
         if not outer or not hasattr(cam, "K"):
@@ -650,12 +650,13 @@ class LimbSearch:
                                                state.cameras, sdfs, rest)[0])
         return out
 
-    def _broad(self, roots, angles, group, cameras, sdfs, rest, unexplained, colour):
-        """The broad round (``BROAD_DRAWS``): the best draw of the whole limb and its score
-        (on all points)."""
+    def _broad(self, roots, angles, group, cameras, sdfs, rest, unexplained, colour, lower,
+               upper):
+        """The broad round (``BROAD_DRAWS``, within ``lower`` and ``upper``): the best draw of
+        the whole limb and its score (on all points)."""
         dofs = group.dofs
         trial = np.repeat(angles[None], BROAD_DRAWS, axis=0)
-        trial[1:, dofs] = self.rng.uniform(self._lower[dofs], self._upper[dofs],
+        trial[1:, dofs] = self.rng.uniform(lower[dofs], upper[dofs],
                                            size=(BROAD_DRAWS - 1, len(dofs)))
         s = self.score(roots, trial, group.segments, cameras, sdfs, rest, unexplained,
                        colour=colour, sparse=True)
@@ -669,7 +670,7 @@ class LimbSearch:
             top = top[-keep:]
             near = np.repeat(top, BROAD_LOCAL, axis=0)
             near[:, dofs] += self.rng.normal(size=(len(near), len(dofs))) * width
-            top = self._clamp(np.concatenate([top, near]))
+            top = np.clip(np.concatenate([top, near]), lower, upper)
             full = self.score(roots, top, group.segments, cameras, sdfs, rest, unexplained,
                               colour=colour)
             if colour is not None:
@@ -685,8 +686,7 @@ class LimbSearch:
         With the ``colour`` of its end (:meth:`score`) every stage is scored on the whole limb,
         whose end each stage moves. Draws stay within one frame's reach (``reach``) of
         ``angles``."""
-        self._lower = np.maximum(self.body.lower, angles - self.reach)
-        self._upper = np.minimum(self.body.upper, angles + self.reach)
+        lower, upper = self._bounds(angles)
         if not group.name.endswith(self.attract):
             unexplained = [None] * len(unexplained)
         current, current_plain = self.score(roots, angles[None], group.segments, cameras, sdfs,
@@ -717,7 +717,7 @@ class LimbSearch:
             # better pose (only unexplained foreground or its end's colour could call it
             # away); the stages start from the better of the two.
             broad, broad_score = self._broad(roots, angles, group, cameras, sdfs, rest,
-                                             unexplained, colour)
+                                             unexplained, colour, lower, upper)
             if fits and broad_score - current < 0.5 * self.margin:
                 return angles, 0.0
             if broad_score > current:
@@ -726,14 +726,12 @@ class LimbSearch:
             # The limb fits; only unexplained foreground could call it away. A cheap probe
             # (few draws, the whole limb at once) decides whether a full search is worth it.
             probe = np.repeat(angles[None], PROBE_DRAWS, axis=0)
-            probe[1:, group.dofs] = self.rng.uniform(self._lower[group.dofs],
-                                                     self._upper[group.dofs],
+            probe[1:, group.dofs] = self.rng.uniform(lower[group.dofs], upper[group.dofs],
                                                      size=(PROBE_DRAWS - 1, len(group.dofs)))
             gain = self.score(roots, probe, group.segments, cameras, sdfs, rest, unexplained,
                               colour=colour).max() - current
             if gain < 0.5 * self.margin:
                 return angles, 0.0
-        lower, upper = self._lower, self._upper
         # Each stage: half the draws uniform over the joints' range (within one frame's
         # reach), half around the current pose; then a narrower round around the stage's best.
         for dofs, segs in group.stages:
@@ -750,7 +748,7 @@ class LimbSearch:
                     half = self.draws // 2
                     trial[half:, dofs] = self.rng.uniform(lower[dofs], upper[dofs],
                                                           size=(self.draws - half, len(dofs)))
-                trial = self._clamp(trial)
+                trial = np.clip(trial, lower, upper)
                 s = self.score(roots, trial, segs, cameras, sdfs, rest, unexplained,
                                colour=colour)
                 if colour is not None:
