@@ -363,6 +363,10 @@ def test_fit_after_a_search_that_moved_nothing_reuses_its_scores(body, cams, mon
     grown = [cv2.dilate((lab >= 0).astype(np.uint8), np.ones((17, 17), np.uint8)) > 0
              for lab in labels]
     sdfs = [signed_distance(g) for g in grown]
+    # and a support map without the left shank: the foreground it covers is unexplained, so
+    # the search's score of the left leg where it is counts that credit
+    shank = body.segment_names.index("l_shank")
+    labels = [np.where(lab == shank, -1, lab) for lab in labels]
     state = D.State(np.stack([p0.root] * 3), p0.angles.copy(), list(cams))
     fresh = LimbSearch(body).fit(state, sdfs, labels)
     # arms would be drawn into a halo this thick (an arm held to a trunk wider than the
@@ -370,8 +374,8 @@ def test_fit_after_a_search_that_moved_nothing_reuses_its_scores(body, cams, mon
     search = LimbSearch(body, attract=("leg",))
     angles, moved = search.search(state, sdfs, labels)
     assert moved == []
-    # the search's own leg scores count the unexplained pixels (a few points fall there)
-    assert search.last_scores["left leg"] != fresh["left leg"]
+    # the search's own leg scores count the unexplained pixels
+    assert search.last_scores["left leg"] > fresh["left leg"] + 0.1
     calls = []
     score = search.score
     monkeypatch.setattr(search, "score", lambda *a, **k: calls.append(1) or score(*a, **k))
