@@ -1,6 +1,7 @@
 """The differential tracker's use of the limb search (:mod:`recover`): when the silhouette
 search moves a limb, the frame is solved again from there, and the new pose is kept only if
-the frame is explained better and every moved limb still looks like itself.
+the frame is explained better, no view's silhouette is spoiled to fill the others'
+(``Settings.refit_view_drop``), and every moved limb still looks like itself.
 
 The silhouettes alone cannot tell a lost limb from a wider body. A performer in loose clothes
 fills more of the foreground than the model's trunk does, and an arm drawn into that gap
@@ -333,8 +334,14 @@ class LimbRefit:
         # higher. The moved limbs' image motion compares them with where they were at t,
         # which the search found wrong: both poses are judged without it (a limb the tracker
         # had wrong would otherwise always stay wrong).
+        # Nor may any one view's overlap fall by more than ``refit_view_drop``: a limb put
+        # right in 3D does not spoil one view's silhouette to fill the others' (a limb drawn
+        # onto a shadow or a ghost of the background in some views, which another view sees
+        # as background).
         segments = np.concatenate([groups[name].segments for name in kept])
+        drop = np.asarray(report.iou, float) - np.asarray(report2.iou, float)
         if (np.nanmean(report2.iou) > np.nanmean(report.iou)
+                and not np.any(drop > self.settings.refit_view_drop)
                 and self.frame_cost(state2, state_t, images_t1, renders_t, flow, segments)
                 < (1 + self.settings.refit_tolerance)
                 * self.frame_cost(state, state_t, images_t1, renders_t, flow, segments)):
