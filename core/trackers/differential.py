@@ -93,10 +93,10 @@ class Settings:
                                       # higher (the refit re-solves the whole body from another
                                       # start: the rest moves by a few per cent either way;
                                       # realistic sets, 0.02-0.05 alike, 0.1 worse on punch02)
-    refit_view_drop: float = 0.03     # ... and no view's silhouette overlap (IoU) falls by
-                                      # more than this (dance05_hard's flung legs: 0.040 and
-                                      # 0.042 in one view; 138 other kept refits: 0.020 at
-                                      # most)
+    refit_view_drop: float = 0.02     # ... and no view's silhouette overlap (IoU) falls by
+                                      # more than this (dance05_hard's flung legs: 0.02-0.042
+                                      # in one view, at 0.03 two of five were kept; 138 other
+                                      # kept refits: 0.020 at most, that one a 2 mm change)
     tolerance: float = 1e-5           # stop a level's iterations when no parameter moves more
                                       # (metres or radians)
     contour_per_level: bool = True    # render the contour at every pyramid level (False:
