@@ -94,9 +94,10 @@ class Settings:
                                       # start: the rest moves by a few per cent either way;
                                       # realistic sets, 0.02-0.05 alike, 0.1 worse on punch02)
     refit_view_drop: float = 0.02     # ... and no view's silhouette overlap (IoU) falls by
-                                      # more than this (dance05_hard's flung legs: 0.02-0.042
-                                      # in one view, at 0.03 two of five were kept; 138 other
-                                      # kept refits: 0.020 at most, that one a 2 mm change)
+                                      # more than this (of 276 refits kept before, the 7 over
+                                      # 0.02: 4 worse by 27-66 mm, the dance's flung legs
+                                      # among them, 1 by 2 mm, 2 better by 4 and 15; at 0.03
+                                      # two of the flings were kept)
     tolerance: float = 1e-5           # stop a level's iterations when no parameter moves more
                                       # (metres or radians)
     contour_per_level: bool = True    # render the contour at every pyramid level (False:
