@@ -126,11 +126,11 @@ class ZOOPRAXIS_PG_settings(bpy.types.PropertyGroup):
                     "takes of the motion at hand ('zoopraxis prior'). Used by Initialize and "
                     "Track")
     use_pose_basis: BoolProperty(
-        name="Pose Basis", default=False,
+        name="Pose Basis", default=True,
         description="Uncalibrated, at anchor frames clicked in one view: also search from a "
-                    "basis of captured 3D poses fitted to the clicks and let it choose the "
-                    "pose. Better for performers whose poses are like captured ones, worse "
-                    "for others. Used by Initialize and Track")
+                    "basis of captured 3D poses fitted to the clicks and let it, beside "
+                    "everyday poses, choose the pose. Off: the pose prior alone (a little "
+                    "better for poses unlike any captured). Used by Initialize and Track")
     dims_path: StringProperty(
         name="Body Lengths From", subtype='FILE_PATH',
         description="Keep the body lengths of the same performer fitted before: an init.json "

@@ -252,21 +252,23 @@ def cmu_cases(table, rng, n):
         for k in (1, ONE_VIEW_TRIALS):
             frames.setdefault(k, []).extend((name, joints[i])
                                             for i in cmu_frames(len(joints), k, n))
-    priors = {}
+    priors, bases = {}, {}
     for views, calibrated, plate in ((3, True, VGA_4M), (1, False, FHD_100M)):
         err, pa, pa_first, pa_off, nats, flipped = [], [], [], [], [], []
         for k, (name, X) in enumerate(frames[1 if calibrated else ONE_VIEW_TRIALS]):
             if name not in priors:
                 priors[name] = PosePrior.load(exclude=[name])
+                bases[name] = PoseBasis.load(exclude=[name])
             cams = ring(views, rng, plate, aim_at(X))
             anchor = [Anchor(0, clicks(cams, X, rng))]
             result = initialize(anchor, {c.name: c for c in cams}, calibrated=calibrated,
-                                     pose_prior=priors[name])
+                                     pose_prior=priors[name], pose_basis=bases[name])
             if calibrated:
                 err.append(1000 * mpjpe(result.joints3d(0), X))
             elif k % ONE_VIEW_TRIALS == 0:      # 1 frame in ONE_VIEW_TRIALS only (slow)
                 pa_first.append(1000 * procrustes_mpjpe(result.joints3d(0), X))
-                flipped.append(best_flip(anchor, cams, X, result, pose_prior=priors[name]))
+                flipped.append(best_flip(anchor, cams, X, result, pose_prior=priors[name],
+                                         pose_basis=bases[name]))
                 off = initialize(anchor, {c.name: c for c in cams}, calibrated=False,
                                       pose_prior=None)
                 pa_off.append(1000 * procrustes_mpjpe(off.joints3d(0), X))
@@ -309,13 +311,14 @@ def known_lengths_cases(table, rng, n):
                    for f in (7, third + 7, 2 * third + 7)]
         body = initialize(anchors, {c.name: c for c in cams}).body
         seg.append(100 * segment_error(body, fit3d.dims_from_joints(shoot[::30])))
-        prior = PosePrior.load(exclude=[name])
+        prior, basis = PosePrior.load(exclude=[name]), PoseBasis.load(exclude=[name])
         for i in cmu_frames(len(joints), ONE_VIEW_TRIALS, n):
             X = joints[i]
             cam = ring(1, rng, FHD_100M, aim_at(X))
             t = time.perf_counter()
             result = initialize([Anchor(0, clicks(cam, X, rng))], {cam[0].name: cam[0]},
-                                     calibrated=False, pose_prior=prior, dims=body.dims,
+                                     calibrated=False, pose_prior=prior, pose_basis=basis,
+                                     dims=body.dims,
                                      fit_dims=False)
             secs.append(time.perf_counter() - t)
             pa.append(1000 * procrustes_mpjpe(result.joints3d(0), X))
@@ -340,18 +343,19 @@ def one_view_anchors_cases(table, rng, n, apart=25):
     for name in ("131_01", "131_03", "01_01"):
         joints = cmu_joints(name)
         true_dims = fit3d.dims_from_joints(joints[::30])
-        prior = PosePrior.load(exclude=[name])
+        held = dict(pose_prior=PosePrior.load(exclude=[name]),
+                    pose_basis=PoseBasis.load(exclude=[name]))
         for i in np.linspace(0, len(joints) - 1, max(2, n // 3)).astype(int):
             frames = [int(i + k * apart) % len(joints) for k in range(3)]
             cam = ring(1, rng, FHD_100M, aim_at(joints[i]))
             anchors = [Anchor(f, clicks(cam, joints[f], rng)) for f in frames]
             cameras = {cam[0].name: cam[0]}
-            result = initialize(anchors, cameras, calibrated=False, pose_prior=prior)
+            result = initialize(anchors, cameras, calibrated=False, **held)
             together += [1000 * procrustes_mpjpe(result.joints3d(f), joints[f])
                          for f in frames]
             seg_together.append(100 * segment_error(result.body, true_dims, proportions=True))
             for anchor in anchors:
-                one = initialize([anchor], cameras, calibrated=False, pose_prior=prior)
+                one = initialize([anchor], cameras, calibrated=False, **held)
                 alone.append(1000 * procrustes_mpjpe(one.joints3d(anchor.frame),
                                                           joints[anchor.frame]))
                 seg_alone.append(100 * segment_error(one.body, true_dims, proportions=True))
@@ -376,19 +380,20 @@ def length_error_cases(table, rng, n, errors=(0.0, 0.01, 0.02, 0.05)):
     for name in ("131_01", "131_03", "01_01"):
         joints = cmu_joints(name)
         true_dims = fit3d.dims_from_joints(joints[::30])
-        prior = PosePrior.load(exclude=[name])
+        held = dict(pose_prior=PosePrior.load(exclude=[name]),
+                    pose_basis=PoseBasis.load(exclude=[name]))
         for i in cmu_frames(len(joints), 2, n):
             X = joints[i]
             cam = ring(1, rng, FHD_100M, aim_at(X))
             anchor = [Anchor(0, clicks(cam, X, rng))]
             cameras = {cam[0].name: cam[0]}
-            result = initialize(anchor, cameras, calibrated=False, pose_prior=prior)
+            result = initialize(anchor, cameras, calibrated=False, **held)
             fitted.append(1000 * procrustes_mpjpe(result.joints3d(0), X))
             seg.append(100 * segment_error(result.body, true_dims, proportions=True))
             for e in errors:
                 dims = {k: v * (1.0 + rng.normal(0.0, e)) for k, v in true_dims.items()}
-                result = initialize(anchor, cameras, calibrated=False, pose_prior=prior,
-                                         dims=dims, fit_dims=False)
+                result = initialize(anchor, cameras, calibrated=False, **held, dims=dims,
+                                    fit_dims=False)
                 kept[e].append(1000 * procrustes_mpjpe(result.joints3d(0), X))
     case = "CMU frames, 1 uncalibrated, 1080p @100m, lengths"
     table.add(case, "PA-MPJPE mm (vs CMU joints), fitted", fitted, "<= 40")
@@ -565,18 +570,21 @@ def limits_cases(table, rng, n):
     def judge(case, X, cams, clicked, priors, dims):
         anchor = [Anchor(0, clicked)]
         cameras = {c.name: c for c in cams}
-        for label, prior in priors.items():
+        for label, (prior, basis) in priors.items():
             for lengths, options in (("lengths fitted", {}),
                                      ("true lengths kept", dict(dims=dims, fit_dims=False))):
                 result = initialize(anchor, cameras, calibrated=False, pose_prior=prior,
-                                         **options)
+                                    pose_basis=basis, **options)
                 # the target is about what ships; the other rows add what no animator has
                 target = "<= 40" if label in ("shipped prior", "held-out prior") \
                     and not options else ""
                 rows.setdefault((case, f"PA-MPJPE mm, {label}, {lengths}", target), []).append(
                     1000 * procrustes_mpjpe(result.joints3d(0), X))
 
-    kind = {"shipped prior": "default", "prior of the kind judged": everyday_prior()}
+    # (pose prior, pose basis); the basis is the shipped one but where the prior is held out
+    kind = {"shipped prior": ("default", "default"),
+            "shipped prior, no pose basis": ("default", None),
+            "prior of the kind judged": (everyday_prior(), "default")}
     for _ in range(n * ONE_VIEW_TRIALS):
         body = synth.random_subject(rng)
         X = body.joints(synth.everyday_pose(body, rng))
@@ -590,8 +598,9 @@ def limits_cases(table, rng, n):
         for name in ("131_01", "131_03", "01_01"):
             joints = cmu_joints(name)
             dims = fit3d.dims_from_joints(joints[::30])
-            priors = {"held-out prior": PosePrior.load(exclude=[name]),
-                      "in-sample prior": everything}
+            priors = {"held-out prior": (PosePrior.load(exclude=[name]),
+                                         PoseBasis.load(exclude=[name])),
+                      "in-sample prior": (everything, "default")}
             for i in cmu_frames(len(joints), 2, n):
                 X = joints[i]
                 cams = ring(1, rng, FHD_100M, aim_at(X))
@@ -614,12 +623,12 @@ def held_out_subjects_cases(table, rng, n):
     """One uncalibrated view (1080p from afar, 2 px clicks) of frames of performers the priors
     have not seen: for each fold of SUBJECT_FOLDS the shipped pose prior and proportions prior
     without that fold's performers, judged on n // 5 random frames of each of them (a random
-    take, a random frame). Rows: the pose prior of the four takes it had before cmu_more
-    (those of the fold left out) with the template's proportions; the prior of all other
-    performers with the template's proportions (what ships); that prior with the proportions
-    prior of the other performers (``initialize(..., proportions=...)``); that prior with the
-    pose basis of the other performers (``initialize(..., pose_basis=...)``); and, beside them,
-    the performer's true lengths kept. Each row also apart for the performers captured with
+    take, a random frame). Rows: the pose prior and the pose basis of all other performers
+    with the template's proportions (what ships); that prior without the basis
+    (``--no-pose-basis``); the pose prior of the four takes it had before cmu_more (those of
+    the fold left out), without the basis; the prior and basis with the proportions prior of
+    the other performers (``initialize(..., proportions=...)``); and, beside them, the
+    performer's true lengths kept. Each row also apart for the performers captured with
     their own lengths and for those on cgspeed's one Daz figure."""
     from zoopraxis.core.files import cmu
     from zoopraxis.core.body import fit3d
@@ -640,15 +649,15 @@ def held_out_subjects_cases(table, rng, n):
                               pose.takes[keep]) if keep.any() else None
         proportions = ProportionsPrior.load(exclude=fold)
         basis = PoseBasis.load(exclude_subjects=fold)
-        variants = (("prior of the 4 takes before cmu_more, template proportions", four,
-                     None, None, False),
-                    ("prior of the other performers, template proportions", pose, None, None,
+        variants = (("prior and pose basis of the other performers, template proportions",
+                     pose, basis, None, False),
+                    ("prior of the other performers, no pose basis", pose, None, None, False),
+                    ("prior of the 4 takes before cmu_more, no pose basis", four, None, None,
                      False),
-                    ("prior and proportions of the other performers", pose, None, proportions,
-                     False),
-                    ("prior and pose basis of the other performers", pose, basis, None, False),
-                    ("prior of the other performers, true lengths kept", pose, None, None,
-                     True))
+                    ("prior, basis and proportions of the other performers", pose, basis,
+                     proportions, False),
+                    ("prior and basis of the other performers, true lengths kept", pose, basis,
+                     None, True))
         for subject in fold:
             for _ in range(per_subject):
                 path = takes[subject][rng.integers(len(takes[subject]))]
@@ -673,8 +682,9 @@ def held_out_subjects_cases(table, rng, n):
         print(f"  fold {'/'.join(fold)} done", file=sys.stderr, flush=True)
     case = "held-out CMU performers, 1 uncalibrated, 1080p @100m"
     for label, values in rows.items():
-        target = "<= 40" if label == "prior of the other performers, template proportions" \
-            else ""
+        target = "<= 40" if label.startswith("prior and pose basis of the other performers, "
+                                             "template proportions") \
+            and ";" not in label else ""
         table.add(case, f"PA-MPJPE mm, {label}", values, target)
 
 

@@ -97,25 +97,20 @@ def add_perspective_argument(parser):
 
 def check_uncalibrated_options(args, calibrated):
     """Refuse ``--camera-tilt`` and ``--perspective`` with a calibration, which gives both, and
-    ``--pose-basis`` with a calibration or without a pose prior (it works beside one, in
-    uncalibrated views)."""
+    ``--no-pose-basis`` (the basis is for uncalibrated views only)."""
     for flag, given, what in (("--camera-tilt", args.camera_tilt is not None, "tilt"),
                               ("--perspective", args.perspective, "perspective")):
         if given and calibrated:
             raise ZoopraxisError(f"{flag} is for uncalibrated views: the calibration gives "
                                  f"the cameras' {what}")
-    if getattr(args, "pose_basis", False):
-        if calibrated:
-            raise ZoopraxisError("--pose-basis is for uncalibrated views: with a calibration "
-                                 "the pose prior alone chooses a one-view frame's depths")
-        if getattr(args, "no_pose_prior", False):
-            raise ZoopraxisError("--pose-basis works beside the pose prior: drop "
-                                 "--no-pose-prior")
+    if getattr(args, "no_pose_basis", False) and calibrated:
+        raise ZoopraxisError("--no-pose-basis is for uncalibrated views: with a calibration "
+                             "the pose prior alone chooses a one-view frame's depths")
 
 
 def add_pose_prior_arguments(parser):
-    """``--pose-prior FILE``, ``--no-pose-prior`` and ``--pose-basis`` for frames clicked in
-    one view."""
+    """``--pose-prior FILE``, ``--no-pose-prior`` and ``--no-pose-basis`` for frames clicked
+    in one view."""
     parser.add_argument("--pose-prior", default=None, metavar="FILE",
                         help="at an anchor frame clicked in one view, choose the limbs' depth "
                              "with this pose prior (from 'zoopraxis prior': takes of the kind "
@@ -123,11 +118,12 @@ def add_pose_prior_arguments(parser):
     parser.add_argument("--no-pose-prior", action="store_true",
                         help="at an anchor frame clicked in one view, choose the limbs' depth "
                              "without a pose prior learned from motion capture")
-    parser.add_argument("--pose-basis", action="store_true",
-                        help="uncalibrated, at an anchor frame clicked in one view: also "
-                             "search from the shipped basis of captured 3D poses and let it "
-                             "choose the pose (better for performers whose poses are like "
-                             "captured ones, worse for others)")
+    parser.add_argument("--no-pose-basis", action="store_true",
+                        help="uncalibrated, at an anchor frame clicked in one view: without "
+                             "the shipped basis of captured 3D poses (its fits to the clicks "
+                             "as starts, its density beside everyday poses' in the choice of "
+                             "the pose); the pose prior alone, a little better for poses "
+                             "unlike any captured")
 
 
 def parse_pose_prior(args, template):
@@ -181,7 +177,7 @@ def parse_camera_tilt(text):
 def parse_init_options(args, calibrated, fit_dims=True):
     """The :class:`InitOptions` of the command line's initialization options (``--template``,
     ``--flip``, ``--camera-tilt``, ``--perspective``, ``--pose-prior`` / ``--no-pose-prior``,
-    ``--pose-basis``, ``--dims-from``), each checked.
+    ``--no-pose-basis``, ``--dims-from``), each checked.
 
     Raises
     ------
@@ -197,7 +193,7 @@ def parse_init_options(args, calibrated, fit_dims=True):
     pose_prior = parse_pose_prior(args, args.template)
     dims = read_dims(args.dims_from, args.template) if args.dims_from else None
     return InitOptions(template=args.template, flips=flips, pose_prior=pose_prior,
-                       pose_basis="default" if args.pose_basis else None, dims=dims,
+                       pose_basis=None if args.no_pose_basis else "default", dims=dims,
                        fit_dims=fit_dims, camera_tilt=camera_tilt,
                        perspective=args.perspective)
 

@@ -49,8 +49,7 @@ class InitOptions:
     pose_basis : PoseBasis, "default", path or None
         Uncalibrated, at anchor frames clicked in one view: the basis of captured 3D joint
         sets that gives more starts and joins the choice of the pose (:func:`run.initialize`):
-        the shipped one, a given one, the file of one, or none (the default: opt-in, for
-        performers whose poses are like captured ones).
+        the shipped one (the default), a given one, the file of one, or none.
     dims : dict, optional
         The performer's body lengths (metres), kept instead of fitted.
     fit_dims : bool
@@ -71,7 +70,7 @@ class InitOptions:
     template: str = "full"
     flips: dict = None
     pose_prior: object = "default"
-    pose_basis: object = None
+    pose_basis: object = "default"
     dims: dict = None
     fit_dims: bool = True
     camera_tilt: tuple = CAMERA_TILT_DEG

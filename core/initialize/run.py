@@ -120,7 +120,7 @@ def _seen_twice(anchor, views):
 
 def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None, fit_dims=True,
                views=None, pose_prior="default", flips=None, camera_tilt=CAMERA_TILT_DEG,
-               perspective=False, proportions=None, pose_basis=None):
+               perspective=False, proportions=None, pose_basis="default"):
     """Pose, angles and body dimensions from the clicked joints of anchor frames (§2.6).
 
     Parameters
@@ -175,17 +175,15 @@ def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None,
         Uncalibrated, in frames clicked in one view with a pose prior: a basis of captured 3D
         joint sets (``priors/basis.py``, ``tools/learn_pose_basis.py``) fitted to the clicks
         gives more starts (with the lengths measured on them, their prior centred there) and
-        its density of the 3D joints joins the pose prior in choosing the limbs' depth signs
-        and the search. ``"default"``: the shipped one. Opt-in, not the default (None;
-        ``--pose-basis`` on the command line, ``InitOptions.pose_basis``, the add-on's *Pose
-        Basis*): on held-out CMU performers in one view it takes the error from 64.2 mm to
-        45.0 (36 frames, Procrustes-aligned; performers and basis held out alike), but random
-        everyday poses of the body model, unlike the captures', from 39.9 to 59.6 (30 poses,
-        ``bench_initialize.py --only limits``), so it is for performers whose poses are like
-        captured ones. A broad Gaussian of the body's everyday poses mixed into its density
-        kept them better (6 of them: 61.5 against 43.5 without the basis) but lost the
-        held-out gain (12 frames: 61.5 against 38.7 and 55.7 without); taking the basis' pose
-        only where it is sure was a middle way, neither (benchmarks/README.md).
+        its density of the 3D joints, mixed half and half with a Gaussian of the body's
+        everyday poses (``PoseBasis.with_broad``, as the pose prior's), joins the pose prior
+        in choosing the limbs' depth signs and the search. ``"default"`` (the default): the
+        shipped one; None: without (``--no-pose-basis``, the add-on's *Pose Basis*). On
+        held-out CMU performers in one view it takes the error from 56.1 mm to 49.5 (36
+        frames, Procrustes-aligned; performers and basis held out alike), on random everyday
+        poses of the body model from 42.6 to 45.3 (30 poses, median 36.5 to 34.9). Without
+        the everyday Gaussian (the basis alone) it was 46.0 and 58.4: poses unlike the
+        captures' were turned towards the captures' depths (benchmarks/README.md).
 
     Returns
     -------
@@ -262,9 +260,12 @@ def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None,
     fit.prior = None if pose_prior is None else \
         pose_prior.with_broad(kin.prior_mean, kin.prior_sigma)
     if not calibrated and fit.prior is not None:
-        from ..priors.basis import resolve_pose_basis
+        from ..priors.basis import everyday_joint_sets, resolve_pose_basis
 
         fit.basis = resolve_pose_basis(pose_basis)
+        if fit.basis is not None and fit.basis.broad is None:
+            # as the pose prior: poses unlike the captures' fall back on everyday ones
+            fit.basis = fit.basis.with_broad(everyday_joint_sets(kin))
     fit.flips = flips
     result = fit.run()
     if calibrated:

@@ -14,6 +14,7 @@ ambiguity shows as different local minima). The 3D joints so found carry the bon
 and each limb's depth sign at once.
 """
 
+import copy
 import zipfile
 from pathlib import Path
 
@@ -39,6 +40,11 @@ FIT_ITERATIONS = 40
 # in :meth:`PoseBasis.cost`: the joints the basis pins (the pelvis, the hips' line) are not
 # exact in a body of other build.
 COST_FLOOR = 0.005
+# Weight of the basis against the broad Gaussian of :meth:`PoseBasis.with_broad` (as the pose
+# prior's against its everyday Gaussian, pose.PRIOR_BROAD_WEIGHT).
+BROAD_WEIGHT = 0.5
+# Everyday joint sets drawn for the broad Gaussian (:func:`everyday_joint_sets`).
+EVERYDAY_SETS = 4000
 _PAIRS = [(JOINT_INDEX[n], JOINT_INDEX["r" + n[1:]]) for n in STANDARD_JOINTS
           if n.startswith("l_")]
 
@@ -64,6 +70,16 @@ def canonical_joints(joints):
     R = np.zeros((len(X), 3, 3))
     R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1], R[:, 2, 2] = c, -s, s, c, 1.0
     return X @ np.swapaxes(R, 1, 2)
+
+
+def _unit_vectors(joints):
+    """Joint sets (B, 17, 3) canonical (:func:`canonical_joints`) and scaled to unit size
+    (their own SIZE_BONES), flattened to (B, 51)."""
+    X = np.asarray(joints, float).reshape(-1, len(STANDARD_JOINTS), 3)
+    a = [JOINT_INDEX[p] for p, _ in SIZE_BONES]
+    b = [JOINT_INDEX[q] for _, q in SIZE_BONES]
+    size = np.linalg.norm(X[:, a] - X[:, b], axis=-1).sum(axis=1)
+    return (canonical_joints(X) / size[:, None, None]).reshape(len(X), -1)
 
 
 def body_size(joints):
@@ -162,19 +178,61 @@ class PoseBasis:
             raise ZoopraxisError("no joint sets to learn a pose basis from")
         return cls(np.concatenate(joints), labels, components)
 
+    broad = None        # (mean, precision, half log-determinant, weight): see with_broad
+
     def cost(self, joints):
         """``-log p`` (nats, up to a constant) of joint sets (B, 17, 3), any heading, position
         and size: each turned to the canonical heading, scaled to unit size (its own
-        SIZE_BONES) and judged by the Gaussian of the kept components and of the residual."""
-        X = np.asarray(joints, float).reshape(-1, len(STANDARD_JOINTS), 3)
-        a = [JOINT_INDEX[p] for p, _ in SIZE_BONES]
-        b = [JOINT_INDEX[q] for _, q in SIZE_BONES]
-        size = np.linalg.norm(X[:, a] - X[:, b], axis=-1).sum(axis=1)
-        d = (canonical_joints(X) / size[:, None, None]).reshape(len(X), -1) - self.mean
+        SIZE_BONES) and judged by the Gaussian of the kept components and of the residual,
+        mixed with the broad Gaussian of :meth:`with_broad` if there is one."""
+        unit = _unit_vectors(joints)
+        d = unit - self.mean
         c = d @ self.components.T
-        rest = (d - c @ self.components).reshape(len(X), -1, 3)
-        return 0.5 * (c ** 2 / self.variances).sum(1) + \
+        rest = (d - c @ self.components).reshape(len(d), -1, 3)
+        own = 0.5 * (c ** 2 / self.variances).sum(1) + \
             0.5 * ((rest ** 2).sum(-1) / np.maximum(self.residual, COST_FLOOR ** 2)).sum(1)
+        if self.broad is None or self.broad[3] >= 1.0:
+            return own
+        mean, precision, half_logdet, weight = self.broad
+        e = unit - mean
+        other = 0.5 * np.einsum("bi,ij,bj->b", e, precision, e)
+        # both normalised (the constant 51/2 log 2 pi is common), then shifted so that a set
+        # far from the broad Gaussian costs what the basis alone says (plus -log weight)
+        return -np.logaddexp(np.log(weight) - own - self._half_logdet,
+                             np.log1p(-weight) - other - half_logdet) - self._half_logdet
+
+    @property
+    def _half_logdet(self):
+        """Half the log-determinant of the covariance whose Gaussian :meth:`cost` is: the
+        components' variances in their span, each joint's residual across it."""
+        if "_hld" not in self.__dict__:
+            V = self.components
+            rest = np.repeat(np.maximum(self.residual, COST_FLOOR ** 2), 3)
+            across = np.eye(V.shape[1]) - V.T @ V
+            precision = V.T @ (V / self.variances[:, None]) + across @ (across / rest[:, None])
+            self._hld = -0.5 * float(np.linalg.slogdet(precision)[1])
+        return self._hld
+
+    def with_broad(self, joints, weight=BROAD_WEIGHT):
+        """The same basis whose density is mixed with a broad Gaussian of other joint sets
+        (``joints``, shape (N, 17, 3), any heading and size; their mirror images are added),
+        weight ``1 - weight`` against the basis' ``weight``. Both are normalised, so a pose
+        unlike the captures' but like those joint sets falls back on the broad one, while
+        among poses like the captures' the basis decides.
+
+        The initialization mixes in the body's everyday poses (:func:`everyday_joint_sets`):
+        one view of the body model's random everyday poses (independent angles within
+        everyday spreads, unlike captured poses) is otherwise turned towards the captures'
+        depths (benchmarks/README.md, "The pose basis with the everyday poses beside it").
+        """
+        Y = canonical_joints(np.asarray(joints, float))
+        data = _unit_vectors(np.concatenate([Y, mirror_joints(Y)]))
+        mean = data.mean(axis=0)
+        cov = np.cov(data.T) + COST_FLOOR ** 2 * np.eye(data.shape[1])
+        out = copy.copy(self)
+        out.broad = (mean, np.linalg.inv(cov), 0.5 * float(np.linalg.slogdet(cov)[1]),
+                     float(weight))
+        return out
 
     def shapes(self, coefficients):
         """Canonical joint sets of coefficients (..., K): shape (..., 17, 3)."""
@@ -296,6 +354,27 @@ def _start_rotations(uv, yaw, tilt):
 
 
 _BASES = {}
+_EVERYDAY = {}
+
+
+def everyday_joint_sets(kin, n=EVERYDAY_SETS, seed=0, spread=0.05):
+    """Joint sets (n, 17, 3) of the body's everyday poses: angles drawn from the kinematics'
+    everyday Gaussian (``kin.prior_mean``, ``kin.prior_sigma``, within the joints' limits, the
+    pose prior's broad Gaussian) on lengths within ``spread`` of the template's. The same
+    sets for the same template every time (``seed``)."""
+    key = (kin.template, int(n), int(seed), float(spread))
+    if key not in _EVERYDAY:
+        rng = np.random.default_rng(seed)
+        groups = 20
+        per = -(-int(n) // groups)
+        out = []
+        for _ in range(groups):
+            dims = kin.default_dims * (1.0 + spread * rng.normal(size=len(kin.default_dims)))
+            angles = np.clip(kin.prior_mean + kin.prior_sigma *
+                             rng.normal(size=(per, kin.n_dofs)), kin.lower, kin.upper)
+            out.append(kin.forward(angles, dims)[0])
+        _EVERYDAY[key] = np.concatenate(out)[:int(n)]
+    return _EVERYDAY[key]
 
 
 def default_pose_basis():

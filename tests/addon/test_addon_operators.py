@@ -629,10 +629,10 @@ class _PanelLayout(_Layout):
         return lambda *args, **options: self
 
 
-def test_pose_basis_toggle_is_off_by_default(blender):
-    """The Initialize step's "Pose Basis", offered while no view is calibrated, is off by
-    default (no basis, as before it) and, turned on, gives Initialize and Track the shipped
-    basis."""
+def test_pose_basis_toggle_is_on_by_default(blender):
+    """The Initialize step's "Pose Basis", offered while no view is calibrated, is on by
+    default (the shipped basis, as ``track`` gives it) and, turned off, gives Initialize and
+    Track none."""
     import types
 
     from zoopraxis.addon import pipeline
@@ -642,7 +642,7 @@ def test_pose_basis_toggle_is_off_by_default(blender):
     bpy.ops.zoopraxis.import_markers(filepath=str(SAMPLE / "markers.json"))
     log = []
     VIEW3D_PT_zoopraxis.draw(types.SimpleNamespace(layout=_PanelLayout(log)), blender)
-    assert ("prop", "use_pose_basis") in log and not settings.use_pose_basis
+    assert ("prop", "use_pose_basis") in log and settings.use_pose_basis
     for on, expected in ((False, None), (True, "default")):
         settings.use_pose_basis = on
         take = pipeline.gather(blender)

@@ -62,7 +62,7 @@ def test_track_writes_a_result(take, tmp_path):
     (["--flip", "3:left-leg"], "frame 3 is not an anchor frame"),
     (["--dims-from", "nope.json"], "nope.json: no such file"),
     (["--perspective"], "--perspective is for uncalibrated views"),
-    (["--pose-basis"], "--pose-basis is for uncalibrated views"),
+    (["--no-pose-basis"], "--no-pose-basis is for uncalibrated views"),
 ])
 def test_track_bad_input_is_one_line(take, tmp_path, change, message):
     run = zoopraxis(*track_args(take, tmp_path / "r.json", *change))

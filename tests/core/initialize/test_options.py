@@ -9,7 +9,7 @@ from zoopraxis.core.initialize.options import CAMERA_TILT_DEG, InitOptions
 def test_defaults_and_what_fits_the_lengths():
     options = InitOptions()
     assert options.template == "full" and options.pose_prior == "default"
-    assert options.pose_basis is None
+    assert options.pose_basis == "default"
     assert options.camera_tilt == CAMERA_TILT_DEG and not options.perspective
     assert options.fits_dims
     assert not InitOptions(fit_dims=False).fits_dims
@@ -29,8 +29,8 @@ def test_bad_options_are_refused_in_one_line():
 
 
 def test_pose_basis_on_the_command_line(monkeypatch):
-    """``--pose-basis`` of ``init`` and ``track`` reaches ``initialize`` as the shipped pose
-    basis; without it the basis is off."""
+    """``init`` and ``track`` give ``initialize`` the shipped pose basis; ``--no-pose-basis``
+    turns it off, and is refused with a calibration (the basis is for uncalibrated views)."""
     from types import SimpleNamespace
 
     from zoopraxis.core.commands import init as init_command, track as track_command
@@ -43,11 +43,11 @@ def test_pose_basis_on_the_command_line(monkeypatch):
     plates = {"cam0": SimpleNamespace(image_size=(1920, 1080))}
     base = ["--markers", "markers.json", "--plate", "cam0=plate", "--out", "out.json"]
     for command in (init_command, track_command):
-        for flag, expected in (([], None), (["--pose-basis"], "default")):
+        for flag, expected in (([], "default"), (["--no-pose-basis"], None)):
             args = command.build_parser().parse_args(base + flag)
             options = parse_init_options(args, calibrated=False)
             run.initialize_take([], ["cam0"], plates, None, options)
             assert options.pose_basis == given[-1] == expected
-        with pytest.raises(ZoopraxisError, match="--pose-basis works beside the pose prior"):
-            parse_init_options(command.build_parser().parse_args(
-                base + ["--pose-basis", "--no-pose-prior"]), calibrated=False)
+        with pytest.raises(ZoopraxisError, match="--no-pose-basis is for uncalibrated views"):
+            parse_init_options(command.build_parser().parse_args(base + ["--no-pose-basis"]),
+                               calibrated=True)

@@ -85,3 +85,52 @@ def test_bad_file_is_named(tmp_path):
         PoseBasis.load(bad)
     with pytest.raises(ZoopraxisError, match="not a pose basis file"):
         PoseBasis.load(tmp_path / "missing.npz")
+
+
+def _quadratic(data, X):
+    """Half the squared Mahalanobis distance of joint sets ``X`` under the Gaussian of the
+    canonical unit-size joint sets ``data`` and their mirror images (floored as the basis)."""
+    def unit(Y):
+        Y = canonical_joints(Y)
+        return (Y / _size_each(Y)[:, None, None]).reshape(len(Y), -1)
+
+    d = unit(np.concatenate([data, mirror_joints(canonical_joints(data))]))
+    cov = np.cov(d.T) + 0.005 ** 2 * np.eye(d.shape[1])
+    e = unit(X) - d.mean(axis=0)
+    return 0.5 * np.einsum("bi,ij,bj->b", e, np.linalg.inv(cov), e)
+
+
+def _size_each(Y):
+    """Each joint set's own size (the summed lengths the basis scales by)."""
+    pairs = (("pelvis", "neck"), ("l_hip", "l_knee"), ("r_hip", "r_knee"),
+             ("l_knee", "l_ankle"), ("r_knee", "r_ankle"))
+    return sum(np.linalg.norm(Y[:, JOINT_INDEX[a]] - Y[:, JOINT_INDEX[b]], axis=-1)
+               for a, b in pairs)
+
+
+def test_everyday_gaussian_beside_the_basis_judges_what_the_basis_does_not_know():
+    """The shipped basis mixed half and half with the Gaussian of the body's everyday poses
+    (both normalised): captured joint sets are still judged by the basis (differences of cost
+    as the basis', to 0.05 nats), everyday ones the basis finds unlikely by the everyday
+    Gaussian (differences as its own), and never more than the basis alone says (plus log 2)."""
+    from zoopraxis.core.body.kinematics import kinematics
+    from zoopraxis.core.priors.basis import everyday_joint_sets
+
+    kin = kinematics("full")
+    basis = default_pose_basis()
+    everyday = everyday_joint_sets(kin)
+    mixed = basis.with_broad(everyday)
+    assert np.array_equal(everyday, everyday_joint_sets(kin))        # the same every time
+    captured = basis.joints[::97]
+    own, both = basis.cost(captured), mixed.cost(captured)
+    assert np.all(both <= own + np.log(2) + 1e-9)
+    assert np.abs(np.diff(both) - np.diff(own)).max() < 0.05
+    others = everyday_joint_sets(kin, n=400, seed=5)
+    own, both = basis.cost(others), mixed.cost(others)
+    assert np.all(both <= own + np.log(2) + 1e-9)
+    far = own > np.median(own)              # those the basis finds least likely
+    assert np.median(own[far] - both[far]) > 10.0
+    broad = _quadratic(everyday, others[far])
+    assert np.abs(np.diff(both[far]) - np.diff(broad)).max() < 0.05
+    # with all the weight on the basis, the basis alone
+    assert np.allclose(basis.with_broad(everyday, weight=1.0).cost(others), own)
