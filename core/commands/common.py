@@ -97,7 +97,7 @@ def add_perspective_argument(parser):
 
 def check_uncalibrated_options(args, calibrated):
     """Refuse ``--camera-tilt`` and ``--perspective`` with a calibration, which gives both, and
-    ``--no-pose-basis`` (the basis is for uncalibrated views only)."""
+    ``--no-pose-basis`` with a calibration (the basis is for uncalibrated views only)."""
     for flag, given, what in (("--camera-tilt", args.camera_tilt is not None, "tilt"),
                               ("--perspective", args.perspective, "perspective")):
         if given and calibrated:
@@ -117,7 +117,8 @@ def add_pose_prior_arguments(parser):
                              "of motion at hand) instead of the shipped one")
     parser.add_argument("--no-pose-prior", action="store_true",
                         help="at an anchor frame clicked in one view, choose the limbs' depth "
-                             "without a pose prior learned from motion capture")
+                             "without a pose prior learned from motion capture (nor the pose "
+                             "basis, which works beside it)")
     parser.add_argument("--no-pose-basis", action="store_true",
                         help="uncalibrated, at an anchor frame clicked in one view: without "
                              "the shipped basis of captured 3D poses (its fits to the clicks "

@@ -225,6 +225,9 @@ class PoseBasis:
         everyday spreads, unlike captured poses) is otherwise turned towards the captures'
         depths (benchmarks/README.md, "The pose basis with the everyday poses beside it").
         """
+        if not 0.0 < weight <= 1.0:
+            raise ZoopraxisError(f"pose basis: the weight of the basis against the broad "
+                                 f"Gaussian must be in (0, 1], not {weight}")
         Y = canonical_joints(np.asarray(joints, float))
         data = _unit_vectors(np.concatenate([Y, mirror_joints(Y)]))
         mean = data.mean(axis=0)
@@ -360,7 +363,8 @@ _EVERYDAY = {}
 def everyday_joint_sets(kin, n=EVERYDAY_SETS, seed=0, spread=0.05):
     """Joint sets (n, 17, 3) of the body's everyday poses: angles drawn from the kinematics'
     everyday Gaussian (``kin.prior_mean``, ``kin.prior_sigma``, within the joints' limits, the
-    pose prior's broad Gaussian) on lengths within ``spread`` of the template's. The same
+    pose prior's broad Gaussian) on lengths spread by ``spread`` (relative, Gaussian) about the
+    template's. The same
     sets for the same template every time (``seed``)."""
     key = (kin.template, int(n), int(seed), float(spread))
     if key not in _EVERYDAY:

@@ -538,7 +538,6 @@ def test_one_view_pose_basis_sets_the_depth_signs_of_a_performer_not_seen():
     assert errors["basis"] < 0.040 and errors["none"] < 0.040
 
 
-
 # Clicks (pixels, 2 px noise) in one 1920x1080 view from 100 m and the joints (metres) of a
 # random everyday pose of a random body of the template's build (bench_initialize.py --only
 # limits, seed 2345, the second pose): the left arm forward across the body, the trunk upright.
@@ -574,6 +573,7 @@ def test_one_view_everyday_pose_unlike_the_captures_keeps_its_depths_beside_the_
                             calibrated=False, pose_basis=basis)
         errors[key] = procrustes_mpjpe(result.joints3d(0), np.array(_EVERYDAY_100M_JOINTS))
     assert errors["shipped"] < 0.040 and errors["alone"] > 0.080
+
 
 # -- initialization: bad input -------------------------------------------------------------------
 

@@ -134,3 +134,23 @@ def test_everyday_gaussian_beside_the_basis_judges_what_the_basis_does_not_know(
     assert np.abs(np.diff(both[far]) - np.diff(broad)).max() < 0.05
     # with all the weight on the basis, the basis alone
     assert np.allclose(basis.with_broad(everyday, weight=1.0).cost(others), own)
+    with pytest.raises(ZoopraxisError, match="must be in"):
+        basis.with_broad(everyday, weight=0.0)
+
+
+def test_basis_density_is_the_gaussian_of_its_components_and_residual(rng):
+    """The basis' cost is half the squared Mahalanobis distance under one covariance, its
+    components' variances in their span and each joint's (floored) residual across it, and
+    its normaliser (the mixture's weight against the everyday Gaussian rests on it) is half
+    that covariance's log-determinant."""
+    basis = default_pose_basis()
+    V = basis.components
+    across = np.eye(V.shape[1]) - V.T @ V
+    rest = np.repeat(np.maximum(basis.residual, 0.005 ** 2), 3)
+    cov = V.T @ (basis.variances[:, None] * V) + across @ (rest[:, None] * across)
+    assert np.isclose(basis._half_logdet, 0.5 * np.linalg.slogdet(cov)[1], rtol=0, atol=1e-6)
+    X = _random_poses(rng, 5)
+    Y = canonical_joints(X)
+    d = (Y / _size_each(Y)[:, None, None]).reshape(5, -1) - basis.mean
+    expected = 0.5 * np.einsum("bi,ij,bj->b", d, np.linalg.inv(cov), d)
+    assert np.allclose(basis.cost(X), expected, rtol=1e-6)
