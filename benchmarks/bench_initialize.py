@@ -127,6 +127,12 @@ def best_flip(anchor, cams, X, first, **options):
     return min(errors)
 
 
+def held_out(name):
+    """``initialize``'s pose prior and pose basis, both learned without the take ``name``."""
+    return dict(pose_prior=PosePrior.load(exclude=[name]),
+                pose_basis=PoseBasis.load(exclude=[name]))
+
+
 def everyday_prior():
     """What a prior of the kind of motion at hand does (``zoopraxis prior``): one learned from
     EVERYDAY_PRIOR_POSES other random everyday poses of other random bodies, like an animator's
@@ -252,28 +258,26 @@ def cmu_cases(table, rng, n):
         for k in (1, ONE_VIEW_TRIALS):
             frames.setdefault(k, []).extend((name, joints[i])
                                             for i in cmu_frames(len(joints), k, n))
-    priors, bases = {}, {}
+    priors = {}
     for views, calibrated, plate in ((3, True, VGA_4M), (1, False, FHD_100M)):
         err, pa, pa_first, pa_off, nats, flipped = [], [], [], [], [], []
         for k, (name, X) in enumerate(frames[1 if calibrated else ONE_VIEW_TRIALS]):
             if name not in priors:
-                priors[name] = PosePrior.load(exclude=[name])
-                bases[name] = PoseBasis.load(exclude=[name])
+                priors[name] = held_out(name)
             cams = ring(views, rng, plate, aim_at(X))
             anchor = [Anchor(0, clicks(cams, X, rng))]
             result = initialize(anchor, {c.name: c for c in cams}, calibrated=calibrated,
-                                     pose_prior=priors[name], pose_basis=bases[name])
+                                     **priors[name])
             if calibrated:
                 err.append(1000 * mpjpe(result.joints3d(0), X))
             elif k % ONE_VIEW_TRIALS == 0:      # 1 frame in ONE_VIEW_TRIALS only (slow)
                 pa_first.append(1000 * procrustes_mpjpe(result.joints3d(0), X))
-                flipped.append(best_flip(anchor, cams, X, result, pose_prior=priors[name],
-                                         pose_basis=bases[name]))
+                flipped.append(best_flip(anchor, cams, X, result, **priors[name]))
                 off = initialize(anchor, {c.name: c for c in cams}, calibrated=False,
                                       pose_prior=None)
                 pa_off.append(1000 * procrustes_mpjpe(off.joints3d(0), X))
                 truth = fit3d.fit_pose(bm.make_body("full", fit3d.dims_from_joints(X)), X)[0]
-                nats.append(float(priors[name].cost(truth.angles[None])[0]))
+                nats.append(float(priors[name]["pose_prior"].cost(truth.angles[None])[0]))
             pa.append(1000 * procrustes_mpjpe(result.joints3d(0), X))
         label = "640x480 @4m" if calibrated else "1080p @100m"
         case = f"CMU frames, {views} {'calibrated' if calibrated else 'uncalibrated'}, {label}"
@@ -311,14 +315,13 @@ def known_lengths_cases(table, rng, n):
                    for f in (7, third + 7, 2 * third + 7)]
         body = initialize(anchors, {c.name: c for c in cams}).body
         seg.append(100 * segment_error(body, fit3d.dims_from_joints(shoot[::30])))
-        prior, basis = PosePrior.load(exclude=[name]), PoseBasis.load(exclude=[name])
+        held = held_out(name)
         for i in cmu_frames(len(joints), ONE_VIEW_TRIALS, n):
             X = joints[i]
             cam = ring(1, rng, FHD_100M, aim_at(X))
             t = time.perf_counter()
             result = initialize([Anchor(0, clicks(cam, X, rng))], {cam[0].name: cam[0]},
-                                     calibrated=False, pose_prior=prior, pose_basis=basis,
-                                     dims=body.dims,
+                                     calibrated=False, **held, dims=body.dims,
                                      fit_dims=False)
             secs.append(time.perf_counter() - t)
             pa.append(1000 * procrustes_mpjpe(result.joints3d(0), X))
@@ -343,8 +346,7 @@ def one_view_anchors_cases(table, rng, n, apart=25):
     for name in ("131_01", "131_03", "01_01"):
         joints = cmu_joints(name)
         true_dims = fit3d.dims_from_joints(joints[::30])
-        held = dict(pose_prior=PosePrior.load(exclude=[name]),
-                    pose_basis=PoseBasis.load(exclude=[name]))
+        held = held_out(name)
         for i in np.linspace(0, len(joints) - 1, max(2, n // 3)).astype(int):
             frames = [int(i + k * apart) % len(joints) for k in range(3)]
             cam = ring(1, rng, FHD_100M, aim_at(joints[i]))
@@ -380,8 +382,7 @@ def length_error_cases(table, rng, n, errors=(0.0, 0.01, 0.02, 0.05)):
     for name in ("131_01", "131_03", "01_01"):
         joints = cmu_joints(name)
         true_dims = fit3d.dims_from_joints(joints[::30])
-        held = dict(pose_prior=PosePrior.load(exclude=[name]),
-                    pose_basis=PoseBasis.load(exclude=[name]))
+        held = held_out(name)
         for i in cmu_frames(len(joints), 2, n):
             X = joints[i]
             cam = ring(1, rng, FHD_100M, aim_at(X))
@@ -598,8 +599,8 @@ def limits_cases(table, rng, n):
         for name in ("131_01", "131_03", "01_01"):
             joints = cmu_joints(name)
             dims = fit3d.dims_from_joints(joints[::30])
-            priors = {"held-out prior": (PosePrior.load(exclude=[name]),
-                                         PoseBasis.load(exclude=[name])),
+            held = held_out(name)
+            priors = {"held-out prior": (held["pose_prior"], held["pose_basis"]),
                       "in-sample prior": (everything, "default")}
             for i in cmu_frames(len(joints), 2, n):
                 X = joints[i]

@@ -364,8 +364,7 @@ def everyday_joint_sets(kin, n=EVERYDAY_SETS, seed=0, spread=0.05):
     """Joint sets (n, 17, 3) of the body's everyday poses: angles drawn from the kinematics'
     everyday Gaussian (``kin.prior_mean``, ``kin.prior_sigma``, within the joints' limits, the
     pose prior's broad Gaussian) on lengths spread by ``spread`` (relative, Gaussian) about the
-    template's. The same
-    sets for the same template every time (``seed``)."""
+    template's. The same sets for the same template every time (``seed``)."""
     key = (kin.template, int(n), int(seed), float(spread))
     if key not in _EVERYDAY:
         rng = np.random.default_rng(seed)

@@ -7,8 +7,8 @@ import pytest
 from zoopraxis.core.body.joints import JOINT_INDEX
 from zoopraxis.core.errors import ZoopraxisError
 from zoopraxis.core.geometry.triangulate import procrustes_mpjpe
-from zoopraxis.core.priors.basis import (PoseBasis, body_size, canonical_joints,
-                                         default_pose_basis, mirror_joints)
+from zoopraxis.core.priors.basis import (PoseBasis, _unit_vectors, body_size,
+                                         canonical_joints, default_pose_basis, mirror_joints)
 from zoopraxis.core.synthetic import synth
 
 
@@ -90,22 +90,10 @@ def test_bad_file_is_named(tmp_path):
 def _quadratic(data, X):
     """Half the squared Mahalanobis distance of joint sets ``X`` under the Gaussian of the
     canonical unit-size joint sets ``data`` and their mirror images (floored as the basis)."""
-    def unit(Y):
-        Y = canonical_joints(Y)
-        return (Y / _size_each(Y)[:, None, None]).reshape(len(Y), -1)
-
-    d = unit(np.concatenate([data, mirror_joints(canonical_joints(data))]))
+    d = _unit_vectors(np.concatenate([data, mirror_joints(canonical_joints(data))]))
     cov = np.cov(d.T) + 0.005 ** 2 * np.eye(d.shape[1])
-    e = unit(X) - d.mean(axis=0)
+    e = _unit_vectors(X) - d.mean(axis=0)
     return 0.5 * np.einsum("bi,ij,bj->b", e, np.linalg.inv(cov), e)
-
-
-def _size_each(Y):
-    """Each joint set's own size (the summed lengths the basis scales by)."""
-    pairs = (("pelvis", "neck"), ("l_hip", "l_knee"), ("r_hip", "r_knee"),
-             ("l_knee", "l_ankle"), ("r_knee", "r_ankle"))
-    return sum(np.linalg.norm(Y[:, JOINT_INDEX[a]] - Y[:, JOINT_INDEX[b]], axis=-1)
-               for a, b in pairs)
 
 
 def test_everyday_gaussian_beside_the_basis_judges_what_the_basis_does_not_know():
@@ -150,7 +138,6 @@ def test_basis_density_is_the_gaussian_of_its_components_and_residual(rng):
     cov = V.T @ (basis.variances[:, None] * V) + across @ (rest[:, None] * across)
     assert np.isclose(basis._half_logdet, 0.5 * np.linalg.slogdet(cov)[1], rtol=0, atol=1e-6)
     X = _random_poses(rng, 5)
-    Y = canonical_joints(X)
-    d = (Y / _size_each(Y)[:, None, None]).reshape(5, -1) - basis.mean
+    d = _unit_vectors(X) - basis.mean
     expected = 0.5 * np.einsum("bi,ij,bj->b", d, np.linalg.inv(cov), d)
     assert np.allclose(basis.cost(X), expected, rtol=1e-6)
