@@ -356,7 +356,7 @@ class BodyModel:
         (B, S, 4, 4).
         """
         B = root.shape[0]
-        E = se3.exp_se3(self.twists[None] * angles[..., None])          # (B, n, 4, 4)
+        E = self._exp(angles)                                           # (B, n, 4, 4)
         seg2world = np.empty((B, self.n_segments, 4, 4))
         prefix = np.empty((B, self.n_dofs, 4, 4))
         for k, parent, dofs in self._plan:
@@ -366,6 +366,14 @@ class BodyModel:
                 T = T @ E[:, j]
             seg2world[:, k] = T
         return prefix, seg2world
+
+    @property
+    def _exp(self):
+        """The joints' exponentials (:class:`se3.RevoluteExp`): ``_exp(angles[, dofs])``."""
+        cached = self._cache.get("exp")
+        if cached is None:
+            cached = self._cache["exp"] = se3.RevoluteExp(self.twists)
+        return cached
 
     @property
     def _dofs_of_segment(self):
@@ -434,8 +442,8 @@ class BodyModel:
         # the chain above them is the same for every draw and is formed once.
         same = ((A == A[:1]).all(axis=0) if root.shape[0] == 1 and n > 1
                 else np.zeros(len(dofs), bool))
-        E_one = se3.exp_se3(self.twists[dofs[same]] * A[0, same][:, None])
-        E_all = se3.exp_se3(self.twists[dofs[~same]][None] * A[:, ~same][..., None])
+        E_one = self._exp(A[0, same], dofs[same])
+        E_all = self._exp(A[:, ~same], dofs[~same])
         where = np.cumsum(same) - 1, np.cumsum(~same) - 1
         T_chain = []
         for i, parent, local in steps:

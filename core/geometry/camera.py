@@ -25,7 +25,7 @@ from typing import ClassVar
 import numpy as np
 
 from ..errors import ZoopraxisError
-from .lens import distort, undistort
+from .lens import no_distortion, distort, undistort
 
 # How far R @ R.T may stray from the identity before R is refused as a rotation. Loose enough for
 # matrices printed with 4-5 decimals in a calibration file, tight enough to catch real mistakes
@@ -442,6 +442,10 @@ class PinholeCamera(_Camera):
         X_cam = self.cam_from_world(X)
         with np.errstate(divide="ignore", invalid="ignore"):
             xy = _perspective_divide(X_cam)
+        if no_distortion(self.dist):
+            # the lens model's sums would be x + 0 and y + 0: the same pixels (a point on the
+            # camera plane keeps its infinite pixel, where the model's 0 * inf made it NaN)
+            return self._pixels_from_normalized(xy)
         return self._pixels_from_normalized(distort(xy, self.dist))
 
     def project_jacobian(self, X):

@@ -31,7 +31,7 @@ def distort_xy(x, y, dist, jacobian=False):
 _R2_PLAIN = 1e300
 
 
-def _no_distortion(dist):
+def no_distortion(dist):
     """Whether all five coefficients are +0.0 (not -0.0, which changes the signs of zeros)."""
     return not dist.any() and not np.signbit(dist).any()
 
@@ -58,7 +58,7 @@ def distort(xy, dist, jacobian=False):
     J : array, shape (..., 2, 2)
         Only if ``jacobian``.
     """
-    if not jacobian and _no_distortion(dist):
+    if not jacobian and no_distortion(dist):
         x, y = xy[..., 0], xy[..., 1]
         r2 = x * x
         r2 += y * y

@@ -619,7 +619,13 @@ class DifferentialTracker(Anchor, LimbRefit):
         return self._search_limbs(state, report, state_t, images_t, images_t1, previous,
                                   renders_t, flow)
 
-    def _step(self, state_t, images_t, images_t1, previous, renders_t, start, flow=None):
+    def _step(self, state_t, images_t, images_t1, previous, renders_t, start, flow=None,
+              look=None):
+        """The frame solved level by level from the prediction (or ``start``); ``(state,
+        report)``. ``look`` (callable of a state), if given, judges the pose the coarser levels
+        reached before the finest is solved: when it says False the step stops there and
+        returns ``(None, None)`` (a refit whose limb no longer looks like itself costs no
+        finest level, about a quarter of a step)."""
         s = self.settings
         V = len(state_t.cameras)
         if flow is None:
@@ -632,6 +638,8 @@ class DifferentialTracker(Anchor, LimbRefit):
         finest = min(s.finest, s.levels - 1)
         base_contour = None
         for level in reversed(range(finest, s.levels)):
+            if look is not None and level == finest < s.levels - 1 and not look(state):
+                return None, None
             sil = None
             if use_sil and s.contour_per_level:
                 sil = self.contour_terms(state, level)

@@ -169,3 +169,22 @@ def test_exp_se3_equals_its_rotation_and_left_jacobian(rng):
     assert np.allclose(b[big], (1 - np.cos(t)) / t**2, rtol=1e-12, atol=0)
     assert np.allclose(c[big], (t - np.sin(t)) / t**3, rtol=1e-9, atol=0)
     assert np.allclose([a[~big], b[~big], c[~big]], [[1.0], [0.5], [1 / 6]], atol=1e-12)
+
+
+def test_revolute_exponential_equals_exp_se3(rng):
+    """The joints' exponential with its hat matrices formed once equals the general one, for
+    batches of angles, a subset of the twists, and angles of 0, tiny and past pi."""
+    axes = rng.normal(size=(7, 3))
+    points = rng.normal(size=(7, 3))
+    twists = se3.revolute_twist(axes, points)
+    exp = se3.RevoluteExp(twists)
+    angles = rng.uniform(-4, 4, size=(5, 7))
+    angles[0, :3] = [0.0, 1e-9, -np.pi]
+    assert np.allclose(exp(angles), se3.exp_se3(twists * angles[..., None]), atol=1e-12)
+    dofs = np.array([4, 1])
+    assert np.allclose(exp(angles[:, dofs], dofs),
+                       se3.exp_se3(twists[dofs] * angles[:, dofs, None]), atol=1e-12)
+    assert np.allclose(exp(angles[2, [3]], [3])[0], se3.exp_se3(twists[3] * angles[2, 3]),
+                       atol=1e-12)
+    with pytest.raises(ZoopraxisError):
+        se3.RevoluteExp(np.array([[0.5, 0.0, 0.0, 1.0, 0.0, 0.0]]))     # a screw, not a hinge

@@ -457,6 +457,51 @@ def test_a_moved_limb_is_kept_only_if_it_still_looks_like_itself(body, cams, mon
         assert err[wrist] > 150
 
 
+@pytest.mark.parametrize("judged", [True, False])
+def test_a_refit_whose_limb_looks_wrong_stops_before_the_finest_level(body, cams, monkeypatch,
+                                                                      judged):
+    """The search (made to) move only the right arm, to where it is not. The refit's coarser
+    levels take it there; judged by the anchor's appearance it no longer looks like itself,
+    and the refit stops before the finest level (its dearest quarter). Not judged, the same
+    refit runs every level."""
+    from zoopraxis.core.trackers.limb_refit import LimbRefit
+
+    p0, p1 = kicked(body)
+    settings = D.Settings(limb_search=True, whole_turn=False)
+    ims = [prepared(f, settings, True) for f in model_plates(body, [p0, p0, p0], cams)]
+    tracker = D.DifferentialTracker(body, True, settings)
+
+    search = tracker.search.search
+
+    def wrong_arm(state, *args, **kwargs):
+        search(state, *args, **kwargs)
+        angles = state.angles.copy()
+        angles[body.dof_index("r_shoulder_flex")] += 0.8
+        return body.clamp(angles), [("right arm", 0.2)]
+
+    monkeypatch.setattr(tracker.search, "search", wrong_arm)
+    if not judged:
+        monkeypatch.setattr(LimbRefit, "_looks_like_itself", lambda *args: True)
+    levels = []
+    level_terms = tracker._level_terms
+
+    def counted(flow, level, *args, **kwargs):
+        levels.append(level)
+        return level_terms(flow, level, *args, **kwargs)
+
+    monkeypatch.setattr(tracker, "_level_terms", counted)
+    anchor = D.State(np.stack([p0.root] * 3), p0.angles.copy(), list(cams))
+    tracker.set_anchor(anchor, ims[0], tracker.render_views(anchor))
+    state, report = tracker.step(anchor.copy(), ims[1], ims[2])
+    top = settings.levels - 1
+    step = list(range(top, -1, -1))
+    assert levels == step + (step if not judged else step[:-1])
+    if judged:
+        assert report.recovered == []
+        err = 1000 * np.linalg.norm(body.joints(state.pose()) - body.joints(p0), axis=1)
+        assert err.max() < 20
+
+
 @pytest.mark.parametrize("view_drop", [D.Settings().refit_view_drop, np.inf])
 def test_a_limb_moved_onto_foreground_one_view_contradicts_is_not_kept(body, cams,
                                                                         monkeypatch,
