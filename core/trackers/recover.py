@@ -39,6 +39,8 @@ SHRINK = 0.6            # points lie this far out towards the surface (robust to
 SDF_SCALE = 3.0         # pixels of signed distance for a full +-1 score
 # credit for foreground that the rest of the body, or the limb's own first segment, covers
 SHARED_CREDIT = 0.4
+# A view judges a limb (:meth:`LimbSearch.fit`) if it shows at least this share of its points.
+MIN_JUDGED = 1.0 / 3.0
 # Search a limb scoring below this. A leg that fits scores 0.75-1; one left behind by a kick
 # with its thigh still in place scores 0.3-0.6 (measured on bench_track's walk3, where such a
 # leg stayed 0.5 m off for 70 frames under a lower threshold). An arm in front of or behind
@@ -396,8 +398,12 @@ class LimbSearch:
             left behind has gone.
 
         plain : bool
-            Also return the score without the credit for unexplained foreground or colour
-            (what ``unexplained=None`` gives).
+            Also return the score without the credit for unexplained foreground or colour,
+            over the points each view shows (:meth:`fit`'s measure): a point on a pixel
+            where the model shows another part (the limb is behind it) says nothing of the
+            limb in that view, in the foreground or out of it (a trunk of the background's
+            colour); a view showing fewer than ``MIN_JUDGED`` of the points is left out (every
+            view left out: all points count, as in the score).
         colour : tuple, optional
             ``(primitive, per_view, ...)``: the points of that primitive (a hand) earn
             ``END_BONUS`` on foreground pixels of its colour; ``per_view[c]`` is None or
@@ -437,6 +443,8 @@ class LimbSearch:
         n = len(angles)
         total = np.zeros(n)
         total_plain = np.zeros(n) if plain else None
+        plain_views = np.zeros(n) if plain else None
+        fallback = np.zeros(n) if plain else None
         used = 0
         T = None
         for c, cam in enumerate(cameras):
@@ -465,9 +473,12 @@ class LimbSearch:
             np.clip(s, -1.0, 1.0, out=s)
             s[off] = -1.0
             shared = None
+            judged = None
             if rest is not None and rest[c] is not None:
                 covered = rest[c].flat_take(flat) if isinstance(rest[c], _RestOfBody) \
                     else np.take(rest[c], flat)
+                if plain:
+                    judged = ~covered | off
                 shared = s > 0
                 shared &= covered
             if chain is not None and len(chain[0]) > 1:
@@ -477,7 +488,16 @@ class LimbSearch:
             if shared is not None:
                 s[shared] *= SHARED_CREDIT
             if plain:
-                total_plain += s.mean(axis=1)
+                fallback += s.mean(axis=1)
+                if judged is None:
+                    total_plain += s.mean(axis=1)
+                    plain_views += 1
+                else:
+                    count = judged.sum(axis=1)
+                    seen = count >= MIN_JUDGED * s.shape[1]
+                    total_plain += np.where(seen, np.where(judged, s, 0.0).sum(axis=1)
+                                            / np.maximum(count, 1), 0.0)
+                    plain_views += seen
             if unexplained is not None and unexplained[c] is not None:
                 bonus = np.take(unexplained[c], flat)
                 bonus &= ~off
@@ -496,7 +516,9 @@ class LimbSearch:
             total += s.mean(axis=1)
             used += 1
         if plain:
-            return total / max(used, 1), total_plain / max(used, 1)
+            plain_score = np.where(plain_views > 0, total_plain / np.maximum(plain_views, 1),
+                                   fallback / max(used, 1))
+            return total / max(used, 1), plain_score
         return total / max(used, 1)
 
     def search(self, state, sdfs, rest_labels, known=None, person=None, colours=None):
@@ -633,7 +655,8 @@ class LimbSearch:
         -------
         dict of str to float
             Limb name -> mean score in [-1, 1]: near 1 when the limb lies inside the
-            foreground of every view, below 0 when it lies mostly outside.
+            foreground of every view, below 0 when it lies mostly outside; each view judges
+            the points it shows (``plain`` in :meth:`score`).
         """
         def same(xs, ys):
             return len(xs) == len(ys) and all(x is y for x, y in zip(xs, ys))
@@ -647,7 +670,7 @@ class LimbSearch:
         for group in self.groups:
             rest = _rest_of_body(labels, group)
             out[group.name] = float(self.score(state.roots, state.angles[None], group.segments,
-                                               state.cameras, sdfs, rest)[0])
+                                               state.cameras, sdfs, rest, plain=True)[1][0])
         return out
 
     def _broad(self, roots, angles, group, cameras, sdfs, rest, unexplained, colour, lower,
