@@ -244,6 +244,8 @@ class RevoluteExp:
         """Transforms (..., k, 4, 4) of ``angles`` (..., k) about the twists ``dofs`` (k,
         default all n)."""
         angles = np.asarray(angles, dtype=float)
+        if dofs is not None:
+            dofs = np.asarray(dofs, dtype=np.intp)      # a tuple would index several axes
         W, W2, Wp, W2p = (self.W, self.W2, self.Wp, self.W2p) if dofs is None else (
             self.W[dofs], self.W2[dofs], self.Wp[dofs], self.W2p[dofs])
         s = np.sin(angles)[..., None]

@@ -621,11 +621,9 @@ class DifferentialTracker(Anchor, LimbRefit):
 
     def _step(self, state_t, images_t, images_t1, previous, renders_t, start, flow=None,
               look=None):
-        """The frame solved level by level from the prediction (or ``start``); ``(state,
-        report)``. ``look`` (callable of a state), if given, judges the pose the coarser levels
-        reached before the finest is solved: when it says False the step stops there and
-        returns ``(None, None)`` (a refit whose limb no longer looks like itself costs no
-        finest level, about a quarter of a step)."""
+        """``(state, report)`` solved coarse to fine from the prediction (or ``start``); a
+        ``look`` (callable of a state) saying False at the coarser levels' pose stops the step
+        there with ``(None, None)`` (a refit's finest level, a quarter of its time, saved)."""
         s = self.settings
         V = len(state_t.cameras)
         if flow is None:

@@ -186,5 +186,6 @@ def test_revolute_exponential_equals_exp_se3(rng):
                        se3.exp_se3(twists[dofs] * angles[:, dofs, None]), atol=1e-12)
     assert np.allclose(exp(angles[2, [3]], [3])[0], se3.exp_se3(twists[3] * angles[2, 3]),
                        atol=1e-12)
+    assert np.array_equal(exp(angles[:, dofs], tuple(dofs)), exp(angles[:, dofs], dofs))
     with pytest.raises(ZoopraxisError):
         se3.RevoluteExp(np.array([[0.5, 0.0, 0.0, 1.0, 0.0, 0.0]]))     # a screw, not a hinge
