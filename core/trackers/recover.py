@@ -488,9 +488,10 @@ class LimbSearch:
             if shared is not None:
                 s[shared] *= SHARED_CREDIT
             if plain:
-                fallback += s.mean(axis=1)
+                mean = s.mean(axis=1)
+                fallback += mean
                 if judged is None:
-                    total_plain += s.mean(axis=1)
+                    total_plain += mean
                     plain_views += 1
                 else:
                     count = judged.sum(axis=1)
