@@ -88,6 +88,15 @@ _MIN_FRAME_JOINTS = 6      # joints a frame needs in its best view to pose the b
 # template's build (tests, synthetic takes) went from under 40 mm to 58 there, and the rendered
 # sets (clicks of seed 7) moved by +1.7, -18.0 and +4.9 mm.
 ONE_VIEW_LEARNED_LENGTHS = ("forearm",)
+# Spread of the lengths about the template's proportions when calibrated views see the anchor's
+# joints from several directions, and the clicks measure the bones. Real bodies' proportions
+# spread more than the 5 % (DIMS_PRIOR_SIGMA) that one view needs: 6-12 % for the limbs across
+# the captured performers (priors/proportions.py), a shank 0.95-1.21 of the thigh. Held at 5 %,
+# the fit of the exact clicks of eight rendered performers in 3-4 views put the shank 3-26 mm
+# short and the forearm 0-26 mm long (benchmarks/bench_anchor_lengths.py), and short legs
+# straighten the tracked knee; with 2 px clicks the lengths' error fell from 7.0, 14.1, 18.1
+# and 19.7 mm (thigh, shank, upper arm, forearm) to 5.1, 10.2, 16.8 and 14.5 at 10 %.
+SEVERAL_VIEWS_DIMS_SIGMA = 0.10
 
 
 def _observations(anchors, views):
@@ -253,9 +262,12 @@ def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None,
             if not dims:
                 # start from the proportions' mean (at the template's size)
                 fit.dims0 = fit.dims_prior[0].copy()
-    if calibrated and fit_dims and proportions is None and \
-            all(_seen_twice(a, views) < _MIN_FRAME_JOINTS for a in anchors):
-        fit.dims_prior = one_view_dims_prior(kin)
+    if calibrated and fit_dims and proportions is None:
+        if all(_seen_twice(a, views) < _MIN_FRAME_JOINTS for a in anchors):
+            fit.dims_prior = one_view_dims_prior(kin)
+        else:
+            fit.dims_prior = (kin.default_dims.copy(),
+                              np.full(len(kin.default_dims), SEVERAL_VIEWS_DIMS_SIGMA))
     pose_prior = resolve_pose_prior(pose_prior, template)
     fit.prior = None if pose_prior is None else \
         pose_prior.with_broad(kin.prior_mean, kin.prior_sigma)
