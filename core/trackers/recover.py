@@ -1,24 +1,24 @@
 """Limb recovery: a silhouette search for a limb the image-motion step left behind.
 
-Gauss-Newton on image motion only follows what moves a few pixels at the coarsest level. A
-kick or a fast arm swing moves a shin further than that, and once the model's leg is left
-behind the frame-to-frame motion cannot bring it back: the appearance under it is now the
-background or the other leg. Bregler & Malik call for a coarse search in front of the
-differential step; this is the cheapest one that works from the plates themselves.
+Gauss-Newton on image motion only follows what moves a few pixels at the coarsest level. A kick
+or a fast arm swing moves a shin further than that, and once the model's leg is left behind the
+frame-to-frame motion cannot bring it back: the appearance under it is now the background or
+the other leg. Bregler & Malik call for a coarse search in front of the differential step; this
+is the cheapest one that works from the plates themselves.
 
 For each limb (each leg, each arm) in turn, with the rest of the body held, poses of the limb's
 joints are drawn around the current ones and scored on the foreground silhouettes of all views:
 points sampled inside the limb's primitives should project inside the foreground (by the signed
 distance), and into foreground that the rest of the body, or the limb's own first segment, do
 not already explain (a shank folded behind its thigh explains nothing the thigh does not). A
-knee is drawn within one frame's reach of where the step left it (``FLEX_SPEED_DEG_S``, at
-the take's frame rate: :meth:`LimbSearch.frame_rate`). Drawing is done in two rounds (wide,
-then narrow around the best). An arm that anything could call away is first drawn whole and
-broadly (:meth:`LimbSearch._broad`, unless ``LimbSearch.broad`` is off: the first of two
-tracking rounds): thousands of draws over its range scored on a few
-points each, the best refined on all of them; its stages start from there. Everything is
-vectorized over draws and points. When a limb's best draw clearly beats its current pose, the
-tracker refines from it (:meth:`DifferentialTracker.step` with ``start``).
+knee is drawn within one frame's reach of where the step left it (``FLEX_SPEED_DEG_S``, at the
+take's frame rate: :meth:`LimbSearch.frame_rate`). Drawing is done in two rounds (wide, then
+narrow around the best). An arm that anything could call away is first drawn whole and broadly
+(:meth:`LimbSearch._broad`, unless ``LimbSearch.broad`` is off: the first of two tracking
+rounds): thousands of draws over its range scored on a few points each, the best refined on all
+of them; its stages start from there. Everything is vectorized over draws and points. When a
+limb's best draw clearly beats its current pose, the tracker refines from it
+(:meth:`DifferentialTracker.step` with ``start``).
 
 On colour plates an arm is also drawn by its hand's colour (``END_BONUS``), and searched when
 its hand is not on that colour (``END_SEEN``), never into the other arm: the one cue that finds
@@ -82,14 +82,14 @@ END_BONUS = 0.6
 END_SEEN = 0.3
 TRUNK_SEGMENTS = ("pelvis", "abdomen", "chest", "head")
 # How fast a joint's flexion can change (degrees per second): the search draws a limb's joints
-# within one frame's reach of where the step left them (the step and the refit after a move
-# are not bounded). A knee: the fastest of 80 CMU captures of 19
-# performers (karate kicks, runs, dance) flexed or straightened 60 degrees in a thirtieth of a
-# second (1800 degrees per second; 99.99 % of their frames under 50). Unbounded, a search took a
-# dancer's straight standing leg to a knee folded to its limit in one frame (dance05_hard, one
-# set of clicks: 12 -> 150 degrees, the ankle 0.87 m off for the rest of the take), the foot
-# hidden behind the thigh where every point of the shank lies inside the silhouettes. Elbows
-# are not bounded: an arm lost in front of the trunk is found again by broad draws.
+# within one frame's reach of where the step left them (the step and the refit after a move are
+# not bounded). A knee: the fastest of 80 CMU captures of 19 performers (karate kicks, runs,
+# dance) flexed or straightened 60 degrees in a thirtieth of a second (1800 degrees per second;
+# 99.99 % of their frames under 50). Unbounded, a search took a dancer's straight standing leg
+# to a knee folded to its limit in one frame (dance05_hard, one set of clicks: 12 -> 150
+# degrees, the ankle 0.87 m off for the rest of the take), the foot hidden behind the thigh
+# where every point of the shank lies inside the silhouettes. Elbows are not bounded: an arm
+# lost in front of the trunk is found again by broad draws.
 FLEX_SPEED_DEG_S = {"knee_flex": 2000.0}
 
 
@@ -377,7 +377,7 @@ class LimbSearch:
         return out
 
     def score(self, roots, angles, segments, cameras, sdfs, rest, unexplained=None,
-              plain=False, colour=None, sparse=False):
+              plain=False, colour=None, sparse=False, views=False):
         """Silhouette score of a batch of poses for one limb, mean over points and views.
 
         Parameters
@@ -412,12 +412,15 @@ class LimbSearch:
             other arm, the face) (:meth:`LimbRefit.end_colours`).
         sparse : bool
             Score on ``BROAD_POINTS`` points per primitive only (a broad round's many draws).
+        views : bool
+            With ``plain``: also return each view's plain score, (N, V): over all points
+            where it shows fewer than ``MIN_JUDGED`` of them, NaN without a silhouette.
 
         Returns
         -------
         score : array, shape (N,)
-        plain_score : array, shape (N,)
-            With ``plain`` only.
+        plain_score, view_scores : array, shape (N,) and (N, V)
+            With ``plain`` and ``views`` only.
         """
         key = tuple(int(k) for k in segments)
         blocks = self._blocks.get((key, sparse))
@@ -445,6 +448,7 @@ class LimbSearch:
         total_plain = np.zeros(n) if plain else None
         plain_views = np.zeros(n) if plain else None
         fallback = np.zeros(n) if plain else None
+        view_scores = np.full((n, len(cameras)), np.nan) if plain and views else None
         used = 0
         T = None
         for c, cam in enumerate(cameras):
@@ -493,12 +497,15 @@ class LimbSearch:
                 if judged is None:
                     total_plain += mean
                     plain_views += 1
+                    view_mean, seen = mean, True
                 else:
                     count = judged.sum(axis=1)
                     seen = count >= MIN_JUDGED * s.shape[1]
-                    total_plain += np.where(seen, np.where(judged, s, 0.0).sum(axis=1)
-                                            / np.maximum(count, 1), 0.0)
+                    view_mean = np.where(judged, s, 0.0).sum(axis=1) / np.maximum(count, 1)
+                    total_plain += np.where(seen, view_mean, 0.0)
                     plain_views += seen
+                if view_scores is not None:
+                    view_scores[:, c] = np.where(seen, view_mean, mean)
             if unexplained is not None and unexplained[c] is not None:
                 bonus = np.take(unexplained[c], flat)
                 bonus &= ~off
@@ -519,7 +526,7 @@ class LimbSearch:
         if plain:
             plain_score = np.where(plain_views > 0, total_plain / np.maximum(plain_views, 1),
                                    fallback / max(used, 1))
-            return total / max(used, 1), plain_score
+            return (total / max(used, 1), plain_score) + ((view_scores,) if views else ())
         return total / max(used, 1)
 
     def search(self, state, sdfs, rest_labels, known=None, person=None, colours=None):
