@@ -112,7 +112,8 @@ class _Problem:
         self.kin = kin
         self.dims_loss = dims_loss
         # (mean (D,), relative sigma (D,)) of the lengths about ``size * mean``: the template's
-        # proportions and DIMS_PRIOR_SIGMA unless a learned proportions prior is given.
+        # proportions and DIMS_PRIOR_SIGMA unless the fit gives its own (a learned proportions
+        # prior, run.one_view_dims_prior, run.SEVERAL_VIEWS_DIMS_SIGMA).
         self.dims_mean, self.dims_sigma = (kin.default_dims, DIMS_PRIOR_SIGMA) \
             if dims_prior is None else (np.asarray(dims_prior[0], float),
                                         np.asarray(dims_prior[1], float))

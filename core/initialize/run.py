@@ -93,9 +93,10 @@ ONE_VIEW_LEARNED_LENGTHS = ("forearm",)
 # spread more than the 5 % (DIMS_PRIOR_SIGMA) that one view needs: 6-12 % for the limbs across
 # the captured performers (priors/proportions.py), a shank 0.95-1.21 of the thigh. Held at 5 %,
 # the fit of the exact clicks of eight rendered performers in 3-4 views put the shank 3-26 mm
-# short and the forearm 0-26 mm long (benchmarks/bench_anchor_lengths.py), and short legs
-# straighten the tracked knee; with 2 px clicks the lengths' error fell from 7.0, 14.1, 18.1
-# and 19.7 mm (thigh, shank, upper arm, forearm) to 5.1, 10.2, 16.8 and 14.5 at 10 %.
+# short and the forearm 0-26 mm long (benchmarks/bench_anchor_lengths.py with the sets of
+# benchmarks/README.md), and short legs straighten the tracked knee; with 2 px clicks the
+# lengths' error fell from 7.0, 14.1, 18.1 and 19.7 mm (thigh, shank, upper arm, forearm) to
+# 5.1, 10.2, 16.8 and 14.5 at 10 %.
 SEVERAL_VIEWS_DIMS_SIGMA = 0.10
 
 
@@ -262,7 +263,7 @@ def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None,
             if not dims:
                 # start from the proportions' mean (at the template's size)
                 fit.dims0 = fit.dims_prior[0].copy()
-    if calibrated and fit_dims and proportions is None:
+    if calibrated and fit_dims:
         if all(_seen_twice(a, views) < _MIN_FRAME_JOINTS for a in anchors):
             fit.dims_prior = one_view_dims_prior(kin)
         else:

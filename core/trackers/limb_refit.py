@@ -40,11 +40,12 @@ APPEARANCE_MIN_POINTS = 20
 # punch02 32.4 / 31.1, sword02 28.6 / 28.2, walk131_hard 34.7 / 36.3.
 APPEARANCE_SLACK = {"leg": 0.0, "arm": 0.02}
 # A moved leg is not kept when a view that showed it on the person no longer does: its
-# silhouette score there (:meth:`recover.LimbSearch.fit`'s, view by view, over all its points
-# where the view shows under a third of them: 1 inside, -1 outside) falls by more than this. A
-# leg is thick and its foreground sure; an arm is thin, and good arm moves fall that far in a
-# view (0.66, to -0.5). Hooked over eight runs of six sets, the refits kept 9 leg moves: the 4
-# that brought a leg nearer the truth fell by at most 0.05 in any view; the 3 that put
+# silhouette score there (:meth:`recover.LimbSearch.fit`'s, view by view: 1 inside, -1 outside)
+# falls by more than this, in a view that shows a third of the leg after the move (before it, a
+# view showing less scores all of the leg's points: the leg was behind the other one). A leg is
+# thick and its foreground sure; an arm is thin, and good arm moves fall that far in a view
+# (0.66, to -0.5). Hooked over eight runs of six sets, the refits kept 9 leg moves: the 4 that
+# brought a leg nearer the truth fell by at most 0.05 in any view; the 3 that put
 # dance05_hard's left leg 0.36-0.41 m off in its last frames fell by 0.87-1.22, to -0.45 to
 # -0.69, in the one view that saw background there (the overlap that the other leg, moved with
 # it, gained in that view hid the loss from ``Settings.refit_view_drop``).
@@ -257,12 +258,15 @@ class LimbRefit:
 
         def view_fit(st, rends):        # each view's score (recover.LimbSearch.fit's)
             rest = _rest_of_body([r.label for r in rends], group)
-            return self.search.score(st.roots, st.angles[None], group.segments, st.cameras,
-                                     sdfs, rest, plain=True, views=True)[2][0]
+            out = self.search.score(st.roots, st.angles[None], group.segments, st.cameras,
+                                    sdfs, rest, plain=True, views=True)
+            return out[2][0], out[3][0]
 
-        before, after = view_fit(state, renders), view_fit(state2, renders2)
+        # a view that shows too little of the leg after the move (behind the other leg)
+        # does not judge it: hidden points score at most recover.SHARED_CREDIT there
+        (before, _), (after, shown) = view_fit(state, renders), view_fit(state2, renders2)
         with np.errstate(invalid="ignore"):
-            return bool(np.any(before - after > LEG_LEAVES_VIEW))
+            return bool(np.any(shown & (before - after > LEG_LEAVES_VIEW)))
 
     def _whole_turn(self, state, report, state_t, images_t, images_t1, previous, renders_t,
                     flow):
@@ -360,6 +364,7 @@ class LimbRefit:
         state2, report2 = solve(moved, lambda st: bool(looking(st, self.render_views(st))))
         if state2 is None:
             return None
+
         def staying(names, state2, report2):
             return [name for name in names
                     if not self._leaves_a_view(groups[name], state, report.renders, state2,

@@ -203,8 +203,7 @@ def _transform_points(T, points, out):
     """``out[n, m] = T[n] @ points[m]`` (rigid transforms (N, 4, 4), points (M, 3)).
 
     Each coordinate is summed as ``(r0 x + r2 z) + r1 y``, the order numpy's einsum takes for
-    this three-term product, so the values equal those of ``np.einsum("nij,mj->nmi", ...)``
-    exactly, at a fraction of its time.
+    this three-term product: the values of ``np.einsum("nij,mj->nmi", ...)`` exactly, faster.
     """
     x, y, z = points[:, 0], points[:, 1], points[:, 2]
     for i in range(3):
@@ -413,14 +412,14 @@ class LimbSearch:
         sparse : bool
             Score on ``BROAD_POINTS`` points per primitive only (a broad round's many draws).
         views : bool
-            With ``plain``: also return each view's plain score, (N, V): over all points
-            where it shows fewer than ``MIN_JUDGED`` of them, NaN without a silhouette.
+            With ``plain``: also each view's plain score (N, V) (over all points where it shows
+            under ``MIN_JUDGED`` of them; NaN: no silhouette) and whether it shows that many.
 
         Returns
         -------
         score : array, shape (N,)
-        plain_score, view_scores : array, shape (N,) and (N, V)
-            With ``plain`` and ``views`` only.
+        plain_score : array, shape (N,)
+            With ``plain`` only; then ``view_scores, view_shown`` with ``views``.
         """
         key = tuple(int(k) for k in segments)
         blocks = self._blocks.get((key, sparse))
@@ -449,6 +448,7 @@ class LimbSearch:
         plain_views = np.zeros(n) if plain else None
         fallback = np.zeros(n) if plain else None
         view_scores = np.full((n, len(cameras)), np.nan) if plain and views else None
+        view_shown = np.zeros(view_scores.shape, bool) if view_scores is not None else None
         used = 0
         T = None
         for c, cam in enumerate(cameras):
@@ -506,6 +506,7 @@ class LimbSearch:
                     plain_views += seen
                 if view_scores is not None:
                     view_scores[:, c] = np.where(seen, view_mean, mean)
+                    view_shown[:, c] = seen
             if unexplained is not None and unexplained[c] is not None:
                 bonus = np.take(unexplained[c], flat)
                 bonus &= ~off
@@ -526,7 +527,8 @@ class LimbSearch:
         if plain:
             plain_score = np.where(plain_views > 0, total_plain / np.maximum(plain_views, 1),
                                    fallback / max(used, 1))
-            return (total / max(used, 1), plain_score) + ((view_scores,) if views else ())
+            extra = (view_scores, view_shown) if views else ()
+            return (total / max(used, 1), plain_score, *extra)
         return total / max(used, 1)
 
     def search(self, state, sdfs, rest_labels, known=None, person=None, colours=None):
