@@ -453,16 +453,10 @@ def test_step_recovers_a_limb_it_had_wrong_on_the_frame_before(body, cams):
     assert err.max() < 60
 
 
-@pytest.mark.parametrize("judged", [True, False])
-def test_a_moved_limb_is_kept_only_if_it_still_looks_like_itself(body, cams, monkeypatch,
-                                                                  judged):
-    """The search moves the kicked leg to where it is and, with it, the right arm to where it
-    is not (as an arm is drawn into a gap beside a trunk wider than the model's). The frame
-    refitted with both is explained better as a whole, the leg's gain outweighing the arm's
-    loss; judged by the anchor's appearance of each moved limb, the arm is left where it was
-    and the leg kept."""
-    from zoopraxis.core.trackers.limb_refit import LimbRefit
-
+def _kick_and_a_wrong_arm(body, cams, monkeypatch):
+    """One step of the tracker, left at the standing pose, onto a frame where the left leg has
+    kicked; the search (made to) move the right arm, wrongly, with the leg. Returns the step's
+    state and report, and the kicked pose."""
     p0, p1 = kicked(body)
     p2 = p1.copy()
     p2.angles[body.dof_index("l_hip_flex")] += 0.1
@@ -479,11 +473,25 @@ def test_a_moved_limb_is_kept_only_if_it_still_looks_like_itself(body, cams, mon
         return body.clamp(angles), moved + [("right arm", 0.2)]
 
     monkeypatch.setattr(tracker.search, "search", with_a_wrong_arm)
-    if not judged:
-        monkeypatch.setattr(LimbRefit, "_looks_like_itself", lambda *args: True)
     anchor = D.State(np.stack([p0.root] * 3), p0.angles.copy(), list(cams))
     tracker.set_anchor(anchor, ims[0], tracker.render_views(anchor))
     state, report = tracker.step(anchor.copy(), ims[1], ims[2])
+    return state, report, p2
+
+
+@pytest.mark.parametrize("judged", [True, False])
+def test_a_moved_limb_is_kept_only_if_it_still_looks_like_itself(body, cams, monkeypatch,
+                                                                  judged):
+    """The search moves the kicked leg to where it is and, with it, the right arm to where it
+    is not (as an arm is drawn into a gap beside a trunk wider than the model's). The frame
+    refitted with both is explained better as a whole, the leg's gain outweighing the arm's
+    loss; judged by the anchor's appearance of each moved limb, the arm is left where it was
+    and the leg kept."""
+    from zoopraxis.core.trackers.limb_refit import LimbRefit
+
+    if not judged:
+        monkeypatch.setattr(LimbRefit, "_looks_like_itself", lambda *args: True)
+    state, report, p2 = _kick_and_a_wrong_arm(body, cams, monkeypatch)
     err = 1000 * np.linalg.norm(body.joints(state.pose()) - body.joints(p2), axis=1)
     wrist = body_joint(body, "r_wrist")
     if judged:
@@ -668,31 +676,13 @@ def test_a_frame_solved_again_without_a_limb_is_checked_again(body, cams, monkey
     limbs' move changed), it is not kept; when it stays, it is."""
     from zoopraxis.core.trackers.limb_refit import LimbRefit
 
-    p0, p1 = kicked(body)
-    p2 = p1.copy()
-    p2.angles[body.dof_index("l_hip_flex")] += 0.1
-    p2.angles = body.clamp(p2.angles)
-    settings = D.Settings(limb_search=True)
-    ims = [prepared(f, settings, True) for f in model_plates(body, [p0, p1, p2], cams)]
-    tracker = D.DifferentialTracker(body, True, settings)
-    search = tracker.search.search
-
-    def with_a_wrong_arm(state, *args, **kwargs):
-        angles, moved = search(state, *args, **kwargs)
-        angles = angles.copy()
-        angles[body.dof_index("r_shoulder_flex")] += 0.8
-        return body.clamp(angles), moved + [("right arm", 0.2)]
-
     checks = []
 
     def leaves(self, group, *args):
         checks.append(group.name)
         return leaves_later and checks.count(group.name) > 1
 
-    monkeypatch.setattr(tracker.search, "search", with_a_wrong_arm)
     monkeypatch.setattr(LimbRefit, "_leaves_a_view", leaves)
-    anchor = D.State(np.stack([p0.root] * 3), p0.angles.copy(), list(cams))
-    tracker.set_anchor(anchor, ims[0], tracker.render_views(anchor))
-    state, report = tracker.step(anchor.copy(), ims[1], ims[2])
+    state, report, _ = _kick_and_a_wrong_arm(body, cams, monkeypatch)
     assert checks.count("left leg") == 2
     assert report.recovered == ([] if leaves_later else ["left leg"])
