@@ -248,13 +248,11 @@ class LimbRefit:
             return True
         return after <= before + APPEARANCE_SLACK.get(group.name.split()[-1], 0.0)
 
-    def _leaves_a_view(self, group, state, renders, state2, renders2, images):
+    def _leaves_a_view(self, group, state, renders, state2, renders2, sdfs):
         """Whether leg ``group`` at ``state2`` has left the person in a view that showed it
-        there at ``state`` (``LEG_LEAVES_VIEW``); False for an arm."""
+        there at ``state`` (``LEG_LEAVES_VIEW``); False for an arm. ``sdfs``: the search's."""
         if group.name.split()[-1] != "leg":
             return False
-        sdfs = [None if im.sdf is None else np.ascontiguousarray(im.sdf[0][..., 0])
-                for im in images]
 
         def view_fit(st, rends):        # each view's score (recover.LimbSearch.fit's)
             rest = _rest_of_body([r.label for r in rends], group)
@@ -322,7 +320,7 @@ class LimbRefit:
             angles, moved = self.search.search(state, sdfs, labels, known, person, colours)
             unexplained = self.search.last_unexplained
             if moved:
-                refit = self._refit(state, report, angles, [name for name, _ in moved],
+                refit = self._refit(state, report, angles, [name for name, _ in moved], sdfs,
                                     state_t, images_t, images_t1, previous, renders_t, flow)
                 if refit is not None:
                     state, report = refit
@@ -337,10 +335,10 @@ class LimbRefit:
             for u, lab in zip(unexplained, labels)])
         return state, report
 
-    def _refit(self, state, report, angles, moved, state_t, images_t, images_t1, previous,
+    def _refit(self, state, report, angles, moved, sdfs, state_t, images_t, images_t1, previous,
                renders_t, flow):
-        """The frame solved again from ``state`` with the ``moved`` limbs at ``angles``;
-        ``(state, report)`` if kept, else None."""
+        """The frame solved again from ``state`` with the ``moved`` limbs at ``angles``
+        (``sdfs``: the search's silhouettes); ``(state, report)`` if kept, else None."""
         groups = {g.name: g for g in self.search.groups}
 
         def solve(names, look=None):
@@ -368,13 +366,14 @@ class LimbRefit:
         def staying(names, state2, report2):
             return [name for name in names
                     if not self._leaves_a_view(groups[name], state, report.renders, state2,
-                                               report2.renders, images_t1)]
+                                               report2.renders, sdfs)]
 
         kept = staying(looking(state2, report2.renders), state2, report2)
         # solved again without the limbs turned down, the others move too: a leg may then
         # leave a view it had kept to (dance05_hard's last frames, clicks 7)
-        while kept and len(kept) < len(moved):
-            moved = kept
+        tried = moved
+        while kept and len(kept) < len(tried):
+            tried = kept
             state2, report2 = solve(kept)
             kept = staying(kept, state2, report2)
         if not kept:
