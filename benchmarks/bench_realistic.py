@@ -7,7 +7,7 @@ as a user would (clicks: the true 2D joints of frame 0 plus 2 px of noise) and s
 
     .venv/bin/python benchmarks/bench_realistic.py [--sets a,b] [--trackers default,hybrid]
         [--keep DIR] [--extra-sets DIR] [--click-seeds 7,8,9]
-        [--track-args "--motion-prior general"]
+        [--track-args "--motion-prior general"] [--shipped-priors]
 
 Columns: MPJPE and Procrustes-aligned PA-MPJPE (mm), frames lost (the tracker said "lost" or
 MPJPE over 150 mm; for one view, PA-MPJPE over 150 mm), knee and elbow flexion RMSE (degrees),
@@ -19,6 +19,12 @@ that are under 50 mm, over all frames called ok.
 ``../shared/bench/render``; they stay outside the repository). ``--track-args`` adds options to
 every ``zoopraxis track`` that run_set.py runs (it has no option for that): run_set.py then
 runs from a scratch folder whose ``.venv/bin/python`` is a script that adds them (POSIX only).
+
+The lengths' prior learned from captured performers (``core/priors/data/proportions_prior.npz``)
+was learned from the very performers the sets show. Each set's track is therefore given that
+prior without the set's performer (the subject of the CMU take its ``about.json`` names), through
+``zoopraxis track --proportions-prior`` (as ``--track-args``): the numbers are those of
+performers the priors have not seen. ``--shipped-priors`` tracks with the shipped file as is.
 
 ``--click-seeds`` runs each set and tracker once per seed of the clicks' 2 px noise (run_set.py
 draws it with seed 7) and adds a line with the mean and the range over the seeds. A tracker that
@@ -122,6 +128,30 @@ def run(set_dir, tracker, keep, seed=RUN_SET_SEED, cwd=ROOT):
     return out
 
 
+def performer(set_dir):
+    """The CMU subject a rendered set shows (its ``about.json`` names the take, e.g.
+    ``131_01.bvh``), or None."""
+    try:
+        clip = json.loads((set_dir / "about.json").read_text())["clip"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    return Path(clip).stem.split("_")[0]
+
+
+def held_out_proportions(set_dir, folder):
+    """A proportions prior file in ``folder``: the shipped one without ``set_dir``'s performer,
+    or None when the shipped one does not have him (or the set does not say who he is)."""
+    from zoopraxis.core.priors.proportions import ProportionsPrior
+
+    subject = performer(set_dir)
+    shipped = ProportionsPrior.load()
+    if subject is None or subject not in set(shipped.subjects):
+        return None
+    path = Path(folder) / f"proportions_without_{subject}.npz"
+    ProportionsPrior.load(exclude=[subject]).save(path)
+    return path
+
+
 def spread_line(name, tracker, runs):
     """Mean and range over click seeds of MPJPE, PA-MPJPE, lost frames and joint angles."""
     def stat(key, fmt):
@@ -143,13 +173,14 @@ def main():
                     help="comma-separated seeds of the clicks' noise (default: run_set.py's)")
     ap.add_argument("--track-args", default="",
                     help="options added to every track, e.g. \"--motion-prior general\"")
+    ap.add_argument("--shipped-priors", action="store_true",
+                    help="track with the shipped proportions prior, the sets' performers in it")
     a = ap.parse_args()
     try:
         seeds = [int(x) for x in a.click_seeds.split(",")]
     except ValueError:
         print(f"--click-seeds: expected whole numbers separated by commas, got {a.click_seeds!r}")
         return 2
-    cwd = checkout_with_track_args(a.track_args) if a.track_args else ROOT
     roots = [bench_dir() / "sets"] + ([Path(a.extra_sets)] if a.extra_sets else [])
     sets = sorted((d for r in roots if r.is_dir() for d in r.iterdir()
                    if (d / "gt.npz").exists()), key=lambda d: d.name)
@@ -165,7 +196,12 @@ def main():
             f"{'ok>150':>6} {'lost<150':>8} {'lost-fine':>9} {'ok<50':>7}")
     print(head)
     print("-" * len(head))
+    priors = tempfile.mkdtemp(prefix="zp-held-out-")
     for d in sets:
+        held_out = None if a.shipped_priors else held_out_proportions(d, priors)
+        track_args = a.track_args + (f" --proportions-prior {shlex.quote(str(held_out))}"
+                                     if held_out else "")
+        cwd = checkout_with_track_args(track_args) if track_args else ROOT
         for tracker in a.trackers.split(","):
             runs = []
             for seed in seeds:

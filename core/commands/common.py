@@ -110,7 +110,7 @@ def check_uncalibrated_options(args, calibrated):
 
 def add_pose_prior_arguments(parser):
     """``--pose-prior FILE``, ``--no-pose-prior`` and ``--no-pose-basis`` for frames clicked
-    in one view."""
+    in one view, and ``--proportions-prior FILE``."""
     parser.add_argument("--pose-prior", default=None, metavar="FILE",
                         help="at an anchor frame clicked in one view, choose the limbs' depth "
                              "with this pose prior (from 'zoopraxis prior': takes of the kind "
@@ -125,6 +125,11 @@ def add_pose_prior_arguments(parser):
                              "as starts, its density beside everyday poses' in the choice of "
                              "the pose); the pose prior alone, a little better for poses "
                              "unlike any captured")
+    parser.add_argument("--proportions-prior", default=None, metavar="FILE",
+                        help="the body proportions the fitted lengths lean on: a file from "
+                             "tools/learn_proportions_prior.py (other captures, or performers "
+                             "held out) instead of the shipped one; uncalibrated, its mean and "
+                             "spread replace the template's proportions")
 
 
 def parse_pose_prior(args, template):
@@ -178,7 +183,7 @@ def parse_camera_tilt(text):
 def parse_init_options(args, calibrated, fit_dims=True):
     """The :class:`InitOptions` of the command line's initialization options (``--template``,
     ``--flip``, ``--camera-tilt``, ``--perspective``, ``--pose-prior`` / ``--no-pose-prior``,
-    ``--no-pose-basis``, ``--dims-from``), each checked.
+    ``--no-pose-basis``, ``--proportions-prior``, ``--dims-from``), each checked.
 
     Raises
     ------
@@ -193,10 +198,15 @@ def parse_init_options(args, calibrated, fit_dims=True):
     check_uncalibrated_options(args, calibrated)
     pose_prior = parse_pose_prior(args, args.template)
     dims = read_dims(args.dims_from, args.template) if args.dims_from else None
+    proportions = None
+    if args.proportions_prior is not None:
+        from ..priors.proportions import ProportionsPrior
+
+        proportions = ProportionsPrior.load(args.proportions_prior)
     return InitOptions(template=args.template, flips=flips, pose_prior=pose_prior,
                        pose_basis=None if args.no_pose_basis else "default", dims=dims,
                        fit_dims=fit_dims, camera_tilt=camera_tilt,
-                       perspective=args.perspective)
+                       perspective=args.perspective, proportions=proportions)
 
 
 def add_output_arguments(parser, what):

@@ -49,6 +49,7 @@ def main(argv):
     out = check_output(args.out, args.force, inputs=[
         ("--markers", args.markers), ("--calibration", args.calibration),
         ("--dims-from", args.dims_from), ("--pose-prior", args.pose_prior),
+        ("--proportions-prior", args.proportions_prior),
         *((f"--plate {view}", path) for view, path in parse_plate_options(args.plate).items())])
     check_template(args.template)
     options = parse_init_options(args, bool(args.calibration), fit_dims=not args.fixed_dims)

@@ -70,6 +70,7 @@ def main(argv):
     out = check_output(args.out, args.force, inputs=[
         ("--markers", args.markers), ("--calibration", args.calibration),
         ("--dims-from", args.dims_from), ("--pose-prior", args.pose_prior),
+        ("--proportions-prior", args.proportions_prior),
         ("--motion-model", args.motion_model),
         *((f"--plate {view}", path) for view, path in paths.items())])
     offsets = parse_view_values(args.offset, "--offset", int)

@@ -60,6 +60,9 @@ class InitOptions:
         Calibrated views ignore it.
     perspective : bool
         Uncalibrated: fit each view's perspective (views near the body).
+    proportions : proportions.ProportionsPrior, optional
+        The performers' proportions the fitted lengths lean on, instead of the shipped prior
+        (:func:`run.initialize`).
 
     Raises
     ------
@@ -75,6 +78,7 @@ class InitOptions:
     fit_dims: bool = True
     camera_tilt: tuple = CAMERA_TILT_DEG
     perspective: bool = False
+    proportions: object = None
 
     def __post_init__(self):
         if self.camera_tilt is not None:

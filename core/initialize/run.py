@@ -98,6 +98,15 @@ ONE_VIEW_LEARNED_LENGTHS = ("forearm",)
 # lengths' error fell from 7.0, 14.1, 18.1 and 19.7 mm (thigh, shank, upper arm, forearm) to
 # 5.1, 10.2, 16.8 and 14.5 at 10 %.
 SEVERAL_VIEWS_DIMS_SIGMA = 0.10
+# The lengths whose prior, in several calibrated views, is centred on the captured performers'
+# mean proportion (the proportions prior) rather than the template's: all of them. The
+# performers' shank is 16 % longer than the template's proportion, the upper arm 14 % longer,
+# the forearm 18 % shorter. With each rendered set's performer left out of the prior, 2 px
+# clicks of eight sets, six seeds (bench_anchor_lengths.py --learned none|all), the lengths'
+# error went from 5.1, 10.2, 16.8 and 14.5 mm (thigh, shank, upper arm, forearm) to 5.3, 8.5,
+# 14.5 and 11.7; 7 % or 14 % wide about that centre did no better (5.8/5.2, 7.9/9.0,
+# 13.7/15.2, 11.5/12.7).
+SEVERAL_VIEWS_LEARNED_LENGTHS = LENGTH_DIMS
 
 
 def _observations(anchors, views):
@@ -173,12 +182,15 @@ def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None,
         Uncalibrated: the views are near the body (a phone or a normal lens a few metres away,
         at least 1 / KAPPA_MAX), so each camera's perspective is fitted too
         (``ScaledOrthoCamera.kappa``). Default: far or telephoto views, scaled orthographic.
-    proportions : proportions.ProportionsPrior, "default" or None
-        Uncalibrated, when the lengths are fitted: the prior of the body's proportions, learned
-        from many performers (``"default"``: the shipped one), or None (the default) for the
-        template's proportions, each within DIMS_PRIOR_SIGMA. Not the default: on held-out CMU
-        performers in one view it was 72.6 mm off instead of 64.2 (36 frames; 60.1 instead of
-        57.2 for those with their own lengths, 88.2 instead of 72.9 for those on cgspeed's Daz
+    proportions : proportions.ProportionsPrior or None
+        The proportions of the performers' bodies (``priors/proportions.py``,
+        ``tools/learn_proportions_prior.py``); None: the shipped prior where the fit leans on
+        learned proportions. Calibrated, when the lengths are fitted: the centre of the lengths'
+        prior (``several_views_dims_prior``, ``one_view_dims_prior``). Uncalibrated, only when
+        given: its mean and spread are the lengths' prior instead of the template's proportions
+        within DIMS_PRIOR_SIGMA. Not the uncalibrated default: on held-out CMU performers in one
+        view the shipped one was 72.6 mm off instead of 64.2 (36 frames; 60.1 instead of 57.2
+        for those with their own lengths, 88.2 instead of 72.9 for those on cgspeed's Daz
         figure), and random bodies of the template's proportions came out 75 mm off instead
         of under 40 (benchmarks/bench_initialize.py --only held-out-subjects).
     pose_basis : basis.PoseBasis, "default", path or None
@@ -254,10 +266,6 @@ def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None,
             # A camera looking down sees the body's up axis turned away from it.
             fit.tilt = (-np.sin(np.radians(down)), np.sin(np.radians(spread)))
         fit.perspective = bool(perspective)
-        if isinstance(proportions, str) and proportions == "default":
-            from ..priors.proportions import default_proportions_prior
-
-            proportions = default_proportions_prior()
         if proportions is not None:
             fit.dims_prior = proportions.mean_sigma()
             if not dims:
@@ -265,10 +273,9 @@ def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None,
                 fit.dims0 = fit.dims_prior[0].copy()
     if calibrated and fit_dims:
         if all(_seen_twice(a, views) < _MIN_FRAME_JOINTS for a in anchors):
-            fit.dims_prior = one_view_dims_prior(kin)
+            fit.dims_prior = one_view_dims_prior(kin, proportions)
         else:
-            fit.dims_prior = (kin.default_dims.copy(),
-                              np.full(len(kin.default_dims), SEVERAL_VIEWS_DIMS_SIGMA))
+            fit.dims_prior = several_views_dims_prior(kin, proportions)
     pose_prior = resolve_pose_prior(pose_prior, template)
     fit.prior = None if pose_prior is None else \
         pose_prior.with_broad(kin.prior_mean, kin.prior_sigma)
@@ -290,18 +297,37 @@ def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None,
     return result
 
 
-def one_view_dims_prior(kin):
+def several_views_dims_prior(kin, proportions=None):
+    """``(mean, relative sigma)`` of the lengths fitted to anchors whose joints calibrated views
+    see from several directions: the captured performers' mean proportion (``proportions``, the
+    shipped prior by default) for ``SEVERAL_VIEWS_LEARNED_LENGTHS`` and the template's for the
+    others, each within ``SEVERAL_VIEWS_DIMS_SIGMA``."""
+    return _learned_centre(kin, SEVERAL_VIEWS_LEARNED_LENGTHS, proportions), \
+        np.full(len(kin.default_dims), SEVERAL_VIEWS_DIMS_SIGMA)
+
+
+def one_view_dims_prior(kin, proportions=None):
     """``(mean, relative sigma)`` of the lengths (``kin``'s ``LENGTH_DIMS``) fitted to frames
     each clicked in one view: the template's proportions within ``DIMS_PRIOR_SIGMA``, with the
-    captured performers' mean proportion for ``ONE_VIEW_LEARNED_LENGTHS`` (see there)."""
-    from ..priors.proportions import default_proportions_prior
+    captured performers' mean proportion (``proportions``, the shipped prior by default) for
+    ``ONE_VIEW_LEARNED_LENGTHS`` (see there)."""
     from .problem import DIMS_PRIOR_SIGMA
 
-    learned = default_proportions_prior().mean_sigma()[0]
+    return _learned_centre(kin, ONE_VIEW_LEARNED_LENGTHS, proportions), \
+        np.full(len(kin.default_dims), DIMS_PRIOR_SIGMA)
+
+
+def _learned_centre(kin, names, proportions):
+    """The template's lengths with the performers' mean proportion (``proportions``, else the
+    shipped prior; none without its file) for ``names``."""
+    from ..priors.proportions import default_proportions_prior
+
     mean = kin.default_dims.copy()
-    index = [LENGTH_DIMS.index(name) for name in ONE_VIEW_LEARNED_LENGTHS]
-    mean[index] = learned[index]
-    return mean, np.full(len(mean), DIMS_PRIOR_SIGMA)
+    prior = proportions if proportions is not None else default_proportions_prior()
+    if names and prior is not None:
+        index = [LENGTH_DIMS.index(name) for name in names]
+        mean[index] = prior.mean_sigma()[0][index]
+    return mean
 
 
 def _image_size(cameras, view, uv):
@@ -344,7 +370,7 @@ def initialize_take(anchors, views, plates, cameras, options, log=None):
                         template=options.template, calibrated=calibrated, views=list(views),
                         flips=options.flips, camera_tilt=options.camera_tilt,
                         pose_prior=options.pose_prior, pose_basis=options.pose_basis,
-                        dims=options.dims,
+                        dims=options.dims, proportions=options.proportions,
                         fit_dims=options.fits_dims, perspective=options.perspective)
     for note in result.flip_notes() + ([result.distance_note()] if options.perspective else []):
         log(note)

@@ -51,3 +51,39 @@ def test_pose_basis_on_the_command_line(monkeypatch):
         with pytest.raises(ZoopraxisError, match="--no-pose-basis is for uncalibrated views"):
             parse_init_options(command.build_parser().parse_args(base + ["--no-pose-basis"]),
                                calibrated=True)
+
+
+def test_proportions_prior_on_the_command_line(monkeypatch, tmp_path):
+    """``--proportions-prior FILE`` gives ``initialize`` that file's performers instead of the
+    shipped prior (None); a file that is not one is refused in one line naming it."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from zoopraxis.core.body.body import DEFAULT_DIMS, LENGTH_DIMS
+    from zoopraxis.core.commands import init as init_command, track as track_command
+    from zoopraxis.core.commands.common import parse_init_options
+    from zoopraxis.core.initialize import run
+    from zoopraxis.core.priors.proportions import ProportionsPrior
+
+    path = tmp_path / "ours.npz"
+    ProportionsPrior(["a", "b"], np.array([[DEFAULT_DIMS[n] * s for n in LENGTH_DIMS]
+                                           for s in (0.95, 1.05)])).save(path)
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"not a prior")
+    given = []
+    monkeypatch.setattr(run, "initialize", lambda *a, **kw: given.append(kw["proportions"]) or
+                        SimpleNamespace(flip_notes=list, notes=[]))
+    plates = {"cam0": SimpleNamespace(image_size=(1920, 1080))}
+    base = ["--markers", "markers.json", "--plate", "cam0=plate", "--out", "out.json"]
+    for command in (init_command, track_command):
+        for flag in ([], ["--proportions-prior", str(path)]):
+            options = parse_init_options(command.build_parser().parse_args(base + flag), True)
+            run.initialize_take([], ["cam0"], plates, {}, options)
+            if flag:
+                assert list(given[-1].subjects) == ["a", "b"]
+            else:
+                assert given[-1] is None
+        with pytest.raises(ZoopraxisError, match=f"{bad}: not a proportions prior file"):
+            parse_init_options(command.build_parser().parse_args(
+                base + ["--proportions-prior", str(bad)]), True)
