@@ -11,8 +11,8 @@ joints are drawn around the current ones and scored on the foreground silhouette
 points sampled inside the limb's primitives should project inside the foreground (by the signed
 distance), and into foreground that the rest of the body, or the limb's own first segment, do
 not already explain (a shank folded behind its thigh explains nothing the thigh does not). A
-knee is drawn within one frame's reach of where the step left it (``FLEX_SPEED_DEG_S``, at the
-take's frame rate: :meth:`LimbSearch.frame_rate`). Drawing is done in two rounds (wide, then
+knee is folded no further than one frame's reach from where the step left it, straightened any
+amount (``FLEX_SPEED_DEG_S``, at the take's rate: :meth:`LimbSearch.frame_rate`). Drawing is done in two rounds (wide, then
 narrow around the best). An arm that anything could call away is first drawn whole and broadly
 (:meth:`LimbSearch._broad`, unless ``LimbSearch.broad`` is off: the first of two tracking
 rounds): thousands of draws over its range scored on a few points each, the best refined on all
@@ -81,15 +81,16 @@ END_BONUS = 0.6
 # in the views that know the colour) is searched whatever its silhouette says.
 END_SEEN = 0.3
 TRUNK_SEGMENTS = ("pelvis", "abdomen", "chest", "head")
-# How fast a joint's flexion can change (degrees per second): the search draws a limb's joints
-# within one frame's reach of where the step left them (the step and the refit after a move are
-# not bounded). A knee: the fastest of 80 CMU captures of 19 performers (karate kicks, runs,
+# How fast a joint's flexion can change (degrees per second): the search folds a limb's joints
+# within one frame's reach of where the step left them (the step and refit are not bounded). A knee: the fastest of 80 CMU captures of 19 performers (karate kicks, runs,
 # dance) flexed or straightened 60 degrees in a thirtieth of a second (1800 degrees per second;
 # 99.99 % of their frames under 50). Unbounded, a search took a dancer's straight standing leg
 # to a knee folded to its limit in one frame (dance05_hard, one set of clicks: 12 -> 150
 # degrees, the ankle 0.87 m off for the rest of the take), the foot hidden behind the thigh
 # where every point of the shank lies inside the silhouettes. Elbows are not bounded: an arm
-# lost in front of the trunk is found again by broad draws.
+# lost in front of the trunk is found again by broad draws. Only folding is bounded (a leg
+# folded up is what scores falsely well): bounded both ways, a run's leg folded to 149 degrees
+# stayed so for 16 frames, every partial unfold turned down (benchmarks/README.md).
 FLEX_SPEED_DEG_S = {"knee_flex": 2000.0}
 
 
@@ -302,9 +303,8 @@ class LimbSearch:
                     self.reach[k] = np.radians(speed) / fps
 
     def _bounds(self, angles):
-        """Where draws from ``angles`` may go: the joint limits within one frame's reach."""
-        return (np.maximum(self.body.lower, angles - self.reach),
-                np.minimum(self.body.upper, angles + self.reach))
+        """Where draws from ``angles`` may go: the limits, folding within a frame's reach."""
+        return (self.body.lower, np.minimum(self.body.upper, angles + self.reach))
 
     def reseed(self, key=()):
         """Restart the draws from a seed made of the search's own and ``key`` (non-negative

@@ -627,9 +627,9 @@ def test_a_leg_folded_behind_its_thigh_scores_below_one_that_covers_its_pixels(b
 
 
 def test_the_search_moves_a_knee_no_faster_than_knees_move(body, cams):
-    """At a known frame rate the search draws a knee within one frame's reach of where it
-    is (FLEX_SPEED_DEG_S): a leg kicked back, its knee bent 126 degrees, is found without a
-    frame rate; at 30 frames a second the knee bends at most 67 degrees."""
+    """At a known frame rate the search folds a knee no further than one frame's reach from
+    where it is (FLEX_SPEED_DEG_S): a leg kicked back, its knee bent 126 degrees, is found
+    without a frame rate; at 30 frames a second the knee bends at most 67 degrees."""
     from zoopraxis.core.trackers.recover import FLEX_SPEED_DEG_S
 
     p0 = body.rest_pose(se3.transform(p=[0, 0, 0.95]))
@@ -651,6 +651,24 @@ def test_the_search_moves_a_knee_no_faster_than_knees_move(body, cams):
     assert abs(bounded[knee] - p0.angles[knee]) <= reach + 1e-12
     # the other DOFs are not bounded
     assert np.isinf(bounded_search.reach[body.dof_index("l_hip_flex")])
+
+
+def test_the_search_straightens_a_folded_knee_whatever_its_reach(body, cams):
+    """The reach bounds a knee's folding only: a leg the tracker left folded (knee 126
+    degrees) where the silhouettes show it straight is straightened in one frame at 30 frames
+    a second, not 67 degrees at a time while the folded leg keeps its place."""
+    p0 = body.rest_pose(se3.transform(p=[0, 0, 0.95]))
+    folded = p0.copy()
+    knee = body.dof_index("l_knee_flex")
+    folded.angles[body.dof_index("l_hip_flex")] = -0.3
+    folded.angles[knee] = 2.2
+    sdfs = [signed_distance(lab >= 0) for lab in silhouettes(body, p0, cams)]
+    state = D.State(np.stack([p0.root] * 3), folded.angles.copy(), list(cams))
+    search = LimbSearch(body, seed=3)
+    search.frame_rate(30.0)
+    angles, moved = search.search(state, sdfs, silhouettes(body, folded, cams))
+    assert [name for name, _ in moved] == ["left leg"]
+    assert angles[knee] < 0.35          # from 2.2 rad, more than a frame's 1.16 of folding
 
 
 def test_the_differential_stepper_bounds_the_search_at_the_takes_frame_rate(body):
