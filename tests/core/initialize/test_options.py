@@ -28,21 +28,30 @@ def test_bad_options_are_refused_in_one_line():
     assert InitOptions(flips={3: "the Left-Leg"}).flips == {3: "the Left-Leg"}
 
 
-def test_pose_basis_on_the_command_line(monkeypatch):
-    """``init`` and ``track`` give ``initialize`` the shipped pose basis; ``--no-pose-basis``
-    turns it off, and is refused with a calibration (the basis is for uncalibrated views)."""
+def _what_initialize_is_given(monkeypatch, key):
+    """``initialize`` replaced by one that records its keyword ``key``: the records, one view's
+    plates, the command line's required arguments, and the commands ``init`` and ``track``."""
     from types import SimpleNamespace
 
     from zoopraxis.core.commands import init as init_command, track as track_command
-    from zoopraxis.core.commands.common import parse_init_options
     from zoopraxis.core.initialize import run
 
     given = []
-    monkeypatch.setattr(run, "initialize", lambda *a, **kw: given.append(kw["pose_basis"]) or
+    monkeypatch.setattr(run, "initialize", lambda *a, **kw: given.append(kw[key]) or
                         SimpleNamespace(flip_notes=list, notes=[]))
     plates = {"cam0": SimpleNamespace(image_size=(1920, 1080))}
     base = ["--markers", "markers.json", "--plate", "cam0=plate", "--out", "out.json"]
-    for command in (init_command, track_command):
+    return given, plates, base, (init_command, track_command)
+
+
+def test_pose_basis_on_the_command_line(monkeypatch):
+    """``init`` and ``track`` give ``initialize`` the shipped pose basis; ``--no-pose-basis``
+    turns it off, and is refused with a calibration (the basis is for uncalibrated views)."""
+    from zoopraxis.core.commands.common import parse_init_options
+    from zoopraxis.core.initialize import run
+
+    given, plates, base, commands = _what_initialize_is_given(monkeypatch, "pose_basis")
+    for command in commands:
         for flag, expected in (([], "default"), (["--no-pose-basis"], None)):
             args = command.build_parser().parse_args(base + flag)
             options = parse_init_options(args, calibrated=False)
@@ -56,12 +65,9 @@ def test_pose_basis_on_the_command_line(monkeypatch):
 def test_proportions_prior_on_the_command_line(monkeypatch, tmp_path):
     """``--proportions-prior FILE`` gives ``initialize`` that file's performers instead of the
     shipped prior (None); a file that is not one is refused in one line naming it."""
-    from types import SimpleNamespace
-
     import numpy as np
 
     from zoopraxis.core.body.body import DEFAULT_DIMS, LENGTH_DIMS
-    from zoopraxis.core.commands import init as init_command, track as track_command
     from zoopraxis.core.commands.common import parse_init_options
     from zoopraxis.core.initialize import run
     from zoopraxis.core.priors.proportions import ProportionsPrior
@@ -71,12 +77,8 @@ def test_proportions_prior_on_the_command_line(monkeypatch, tmp_path):
                                            for s in (0.95, 1.05)])).save(path)
     bad = tmp_path / "bad.npz"
     bad.write_bytes(b"not a prior")
-    given = []
-    monkeypatch.setattr(run, "initialize", lambda *a, **kw: given.append(kw["proportions"]) or
-                        SimpleNamespace(flip_notes=list, notes=[]))
-    plates = {"cam0": SimpleNamespace(image_size=(1920, 1080))}
-    base = ["--markers", "markers.json", "--plate", "cam0=plate", "--out", "out.json"]
-    for command in (init_command, track_command):
+    given, plates, base, commands = _what_initialize_is_given(monkeypatch, "proportions")
+    for command in commands:
         for flag in ([], ["--proportions-prior", str(path)]):
             options = parse_init_options(command.build_parser().parse_args(base + flag), True)
             run.initialize_take([], ["cam0"], plates, {}, options)

@@ -626,17 +626,24 @@ def test_a_leg_folded_behind_its_thigh_scores_below_one_that_covers_its_pixels(b
     assert fold > straight
 
 
+def _kicked_back(body):
+    """The rest pose standing, the same with its left leg kicked back (knee 126 degrees), and
+    the left knee's DOF index."""
+    p0 = body.rest_pose(se3.transform(p=[0, 0, 0.95]))
+    p1 = p0.copy()
+    knee = body.dof_index("l_knee_flex")
+    p1.angles[body.dof_index("l_hip_flex")] = -0.3
+    p1.angles[knee] = 2.2
+    return p0, p1, knee
+
+
 def test_the_search_moves_a_knee_no_faster_than_knees_move(body, cams):
     """At a known frame rate the search folds a knee no further than one frame's reach from
     where it is (FLEX_SPEED_DEG_S): a leg kicked back, its knee bent 126 degrees, is found
     without a frame rate; at 30 frames a second the knee bends at most 67 degrees."""
     from zoopraxis.core.trackers.recover import FLEX_SPEED_DEG_S
 
-    p0 = body.rest_pose(se3.transform(p=[0, 0, 0.95]))
-    p1 = p0.copy()
-    knee = body.dof_index("l_knee_flex")
-    p1.angles[body.dof_index("l_hip_flex")] = -0.3
-    p1.angles[knee] = 2.2
+    p0, p1, knee = _kicked_back(body)
     sdfs = [signed_distance(lab >= 0) for lab in silhouettes(body, p1, cams)]
     labels0 = silhouettes(body, p0, cams)
     state = D.State(np.stack([p0.root] * 3), p0.angles.copy(), list(cams))
@@ -657,11 +664,7 @@ def test_the_search_straightens_a_folded_knee_whatever_its_reach(body, cams):
     """The reach bounds a knee's folding only: a leg the tracker left folded (knee 126
     degrees) where the silhouettes show it straight is straightened in one frame at 30 frames
     a second, not 67 degrees at a time while the folded leg keeps its place."""
-    p0 = body.rest_pose(se3.transform(p=[0, 0, 0.95]))
-    folded = p0.copy()
-    knee = body.dof_index("l_knee_flex")
-    folded.angles[body.dof_index("l_hip_flex")] = -0.3
-    folded.angles[knee] = 2.2
+    p0, folded, knee = _kicked_back(body)
     sdfs = [signed_distance(lab >= 0) for lab in silhouettes(body, p0, cams)]
     state = D.State(np.stack([p0.root] * 3), folded.angles.copy(), list(cams))
     search = LimbSearch(body, seed=3)
