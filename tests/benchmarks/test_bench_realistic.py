@@ -41,3 +41,26 @@ def test_spread_line_gives_mean_and_range():
     assert "mpjpe 40.0 (30.0-50.0)" in line
     assert "lost 2 (0-4)" in line
     assert line.startswith("punch02")
+
+
+def test_each_set_is_tracked_with_a_prior_that_has_not_seen_its_performer(tmp_path):
+    """The proportions prior given to a set's tracks leaves out the performer of the CMU take
+    the set's about.json names; a set that does not say, or whose performer the prior does not
+    have, gets none (the shipped prior is fair to it as it is)."""
+    import json
+
+    from zoopraxis.core.priors.proportions import ProportionsPrior
+
+    bench = _bench()
+    shipped = set(ProportionsPrior.load().subjects)
+    assert "131" in shipped
+    walk, salsa, unnamed = (tmp_path / n for n in ("walk", "salsa", "unnamed"))
+    for folder, clip in ((walk, "131_01.bvh"), (salsa, "60_05.bvh"), (unnamed, None)):
+        folder.mkdir()
+        if clip:
+            (folder / "about.json").write_text(json.dumps({"clip": clip}))
+    path = bench.held_out_proportions(walk, tmp_path)
+    assert set(ProportionsPrior.load(path).subjects) == shipped - {"131"}
+    assert bench.performer(walk) == "131"
+    assert bench.held_out_proportions(salsa, tmp_path) is None      # 60: not in the prior
+    assert bench.held_out_proportions(unnamed, tmp_path) is None
