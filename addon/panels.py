@@ -159,6 +159,7 @@ class VIEW3D_PT_zoopraxis(bpy.types.Panel):
         box = _step(layout, "4. Initialize", 'ARMATURE_DATA', missing["initialize"])
         box.prop(settings, "template")
         box.prop(settings, "pose_prior_path")
+        box.prop(settings, "proportions_prior_path")
         box.prop(settings, "dims_path")
         if not any(view.camera for view in settings.views):       # uncalibrated
             box.prop(settings, "use_pose_basis")

@@ -75,6 +75,7 @@ def gather(context, *, need_markers=True):
     from ..core.imaging.plates import check_same_length, open_plate
     from ..core.initialize.options import CAMERA_TILT_DEG, InitOptions
     from ..core.priors.pose import resolve_pose_prior
+    from ..core.priors.proportions import ProportionsPrior
     from . import markers
     from .calibration import cameras_from_scene
 
@@ -142,6 +143,11 @@ def gather(context, *, need_markers=True):
     pose_prior = bpy.path.abspath(settings.pose_prior_path) if settings.pose_prior_path else ""
     read_file("Pose Prior", "clear the field for the shipped prior", pose_prior,
               resolve_pose_prior)
+    proportions = read_file(
+        "Proportions Prior", "clear the field for the shipped prior",
+        bpy.path.abspath(settings.proportions_prior_path)
+        if settings.proportions_prior_path else "",
+        lambda path, _: ProportionsPrior.load(path))
     dims = read_file("Body Lengths From", "clear the field to fit the lengths",
                      bpy.path.abspath(settings.dims_path) if settings.dims_path else "",
                      read_dims)
@@ -151,7 +157,8 @@ def gather(context, *, need_markers=True):
                           pose_prior=pose_prior or "default",
                           pose_basis="default" if settings.use_pose_basis else None, dims=dims,
                           camera_tilt=(float(settings.camera_tilt), CAMERA_TILT_DEG[1]),
-                          perspective=cameras is None and settings.near_cameras)
+                          perspective=cameras is None and settings.near_cameras,
+                          proportions=proportions)
     return Take(plates, paths, offsets, anchors, cameras, frames, settings.tracker.lower(), n,
                 fps, init_options=options)
 
@@ -193,7 +200,7 @@ def initialize(take, *, progress=None, cancel=None):
 def _fingerprint(take):
     """What an initialization depends on: template, calibration, the anchors' clicks and the
     animator's choices for one-view anchors (flips, camera tilt, pose prior file, pose basis),
-    near uncalibrated views and the body lengths kept from a file."""
+    near uncalibrated views, the body lengths kept from a file and the proportions prior."""
     clicks = tuple((a.frame, v, j, round(u, 2), round(w, 2))
                    for a in take.anchors if a.frame in take.frames
                    for v, joints in sorted(a.views.items())
@@ -211,8 +218,10 @@ def _fingerprint(take):
             prior = (options.pose_prior, None)
     dims = None if not options.dims else tuple(sorted(options.dims.items()))
     basis = options.pose_basis is not None and take.cameras is None
+    proportions = None if options.proportions is None else \
+        (tuple(options.proportions.subjects), options.proportions.lengths.tobytes())
     return options.template, cameras, clicks, flips, tilt, prior, dims, options.perspective, \
-        basis
+        basis, proportions
 
 
 def remember_initial(scene, init, take):

@@ -125,6 +125,12 @@ class ZOOPRAXIS_PG_settings(bpy.types.PropertyGroup):
                     "pose prior: empty for the shipped one, or a prior file learned from "
                     "takes of the motion at hand ('zoopraxis prior'). Used by Initialize and "
                     "Track")
+    proportions_prior_path: StringProperty(
+        name="Proportions Prior", subtype='FILE_PATH',
+        description="The body proportions the fitted lengths lean on: empty for the shipped "
+                    "prior (captured performers), or a file from "
+                    "tools/learn_proportions_prior.py. Uncalibrated, a given file's mean and "
+                    "spread replace the template's proportions. Used by Initialize and Track")
     use_pose_basis: BoolProperty(
         name="Pose Basis", default=True,
         description="Uncalibrated, at anchor frames clicked in one view: also search from a "
