@@ -254,6 +254,8 @@ def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None,
     obs = _observations(anchors, views)
     weights = np.ones(obs.shape[:3])
     warnings = []
+    # every anchor clicked in one view (its lengths seen only through foreshortening)
+    one_view = all(_seen_twice(a, views) < _MIN_FRAME_JOINTS for a in anchors)
     if calibrated:
         fit = _CalibratedFit(kin, obs, weights, [cameras[v] for v in views], views, anchors,
                              dims0, fit_dims, warnings)
@@ -272,7 +274,7 @@ def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None,
                 # start from the proportions' mean (at the template's size)
                 fit.dims0 = fit.dims_prior[0].copy()
     if calibrated and fit_dims:
-        if all(_seen_twice(a, views) < _MIN_FRAME_JOINTS for a in anchors):
+        if one_view:
             fit.dims_prior = one_view_dims_prior(kin, proportions)
         else:
             fit.dims_prior = several_views_dims_prior(kin, proportions)
@@ -292,7 +294,7 @@ def initialize(anchors, cameras, *, template="full", calibrated=True, dims=None,
         from ..files.plausible import fit_rms_warnings
 
         result.warnings.extend(fit_rms_warnings(result.rms, {v: cameras[v] for v in views}))
-    if fit_dims and all(_seen_twice(a, views) < _MIN_FRAME_JOINTS for a in anchors):
+    if fit_dims and one_view:
         result.notes.append(ONE_VIEW_LENGTHS_NOTE)
     return result
 

@@ -12,13 +12,13 @@ points sampled inside the limb's primitives should project inside the foreground
 distance), and into foreground that the rest of the body, or the limb's own first segment, do
 not already explain (a shank folded behind its thigh explains nothing the thigh does not). A
 knee is folded no further than one frame's reach from where the step left it, straightened any
-amount (``FLEX_SPEED_DEG_S``, at the take's rate: :meth:`LimbSearch.frame_rate`). Drawing is done in two rounds (wide, then
-narrow around the best). An arm that anything could call away is first drawn whole and broadly
-(:meth:`LimbSearch._broad`, unless ``LimbSearch.broad`` is off: the first of two tracking
-rounds): thousands of draws over its range scored on a few points each, the best refined on all
-of them; its stages start from there. Everything is vectorized over draws and points. When a
-limb's best draw clearly beats its current pose, the tracker refines from it
-(:meth:`DifferentialTracker.step` with ``start``).
+amount (``FLEX_SPEED_DEG_S``, at the take's rate: :meth:`LimbSearch.frame_rate`). Drawing is
+done in two rounds (wide, then narrow around the best). An arm that anything could call away is
+first drawn whole and broadly (:meth:`LimbSearch._broad`, unless ``LimbSearch.broad`` is off:
+the first of two tracking rounds): thousands of draws over its range scored on a few points
+each, the best refined on all of them; its stages start from there. Everything is vectorized
+over draws and points. When a limb's best draw clearly beats its current pose, the tracker
+refines from it (:meth:`DifferentialTracker.step` with ``start``).
 
 On colour plates an arm is also drawn by its hand's colour (``END_BONUS``), and searched when
 its hand is not on that colour (``END_SEEN``), never into the other arm: the one cue that finds
@@ -82,15 +82,15 @@ END_BONUS = 0.6
 END_SEEN = 0.3
 TRUNK_SEGMENTS = ("pelvis", "abdomen", "chest", "head")
 # How fast a joint's flexion can change (degrees per second): the search folds a limb's joints
-# within one frame's reach of where the step left them (the step and refit are not bounded). A knee: the fastest of 80 CMU captures of 19 performers (karate kicks, runs,
-# dance) flexed or straightened 60 degrees in a thirtieth of a second (1800 degrees per second;
-# 99.99 % of their frames under 50). Unbounded, a search took a dancer's straight standing leg
-# to a knee folded to its limit in one frame (dance05_hard, one set of clicks: 12 -> 150
-# degrees, the ankle 0.87 m off for the rest of the take), the foot hidden behind the thigh
-# where every point of the shank lies inside the silhouettes. Elbows are not bounded: an arm
-# lost in front of the trunk is found again by broad draws. Only folding is bounded (a leg
-# folded up is what scores falsely well): bounded both ways, a run's leg folded to 149 degrees
-# stayed so for 16 frames, every partial unfold turned down (benchmarks/README.md).
+# within one frame's reach of where the step left them (the step and refit are not bounded). A
+# knee: the fastest of 80 CMU captures of 19 performers (kicks, runs, dance) flexed or
+# straightened 60 degrees in a thirtieth of a second (99.99 % of their frames under 50).
+# Unbounded, a search folded a dancer's straight standing leg to its limit in one frame
+# (dance05_hard: 12 -> 150 degrees, the ankle 0.87 m off for the rest of the take), the foot
+# hidden behind the thigh where every point of the shank lies inside the silhouettes. Only
+# folding is bounded (a leg folded up is what scores falsely well): bounded both ways, a run's
+# leg folded to 149 degrees stayed so for 16 frames (benchmarks/README.md). Elbows are not
+# bounded: an arm lost in front of the trunk is found again by broad draws.
 FLEX_SPEED_DEG_S = {"knee_flex": 2000.0}
 
 
