@@ -38,7 +38,7 @@ from zoopraxis.core.body import body as bm  # noqa: E402
 from zoopraxis.core.calibration import calibrate as cal  # noqa: E402
 from zoopraxis.core.geometry import se3  # noqa: E402
 from zoopraxis.core.geometry.triangulate import procrustes_mpjpe  # noqa: E402
-from zoopraxis.core.initialize.flips import FLIP_PARTS, LR_PAIRS  # noqa: E402
+from zoopraxis.core.initialize.flips import FLIP_PARTS, LIMB_FLIPS, LR_PAIRS  # noqa: E402
 from zoopraxis.core.initialize.refine import refine_dims  # noqa: E402
 from zoopraxis.core.initialize.run import initialize  # noqa: E402
 from zoopraxis.core.priors.basis import PoseBasis  # noqa: E402
@@ -125,6 +125,26 @@ def best_flip(anchor, cams, X, first, **options):
         if result.flipped:
             errors.append(1000 * procrustes_mpjpe(result.joints3d(0), X))
     return min(errors)
+
+
+def right_signs_error(Y, X, camera):
+    """Procrustes-aligned error (mm) of a fit ``Y`` against the truth ``X`` with its limbs'
+    depth signs taken as the fit's own: the nearest of the truth and its 255 variants with
+    limb parts (``LIMB_FLIPS``: each upper arm, forearm, thigh and shank) reflected in the
+    camera's depth about their first joint, which a view from afar sees alike. What the fit
+    would be off with every sign chosen right, its lengths and the rest as they are; reported
+    apart from the automatic result (an oracle, not a method)."""
+    depth = np.asarray(camera.R, float)[2]
+    parts = [(JOINT_INDEX[pivot], [JOINT_INDEX[j] for j in beyond])
+             for pivot, beyond in LIMB_FLIPS]
+    best = np.inf
+    for mask in range(2 ** len(parts)):
+        Z = np.array(X, float)
+        for k, (pivot, beyond) in enumerate(parts):
+            if mask >> k & 1:
+                Z[beyond] -= 2.0 * ((Z[beyond] - Z[pivot]) @ depth)[:, None] * depth
+        best = min(best, 1000 * procrustes_mpjpe(Y, Z))
+    return best
 
 
 def held_out(name):
@@ -629,8 +649,10 @@ def held_out_subjects_cases(table, rng, n):
     (``--no-pose-basis``); the pose prior of the four takes it had before cmu_more (those of
     the fold left out), without the basis; the prior and basis with the proportions prior of
     the other performers (``initialize(..., proportions=...)``); and, beside them, the
-    performer's true lengths kept. Each row also apart for the performers captured with
-    their own lengths and for those on cgspeed's one Daz figure."""
+    performer's true lengths kept; and the first row's fits with every limb's depth sign
+    taken right (``right_signs_error``, an oracle: what the signs cost, not a method). Each
+    row also apart for the performers captured with their own lengths and for those on
+    cgspeed's one Daz figure."""
     from zoopraxis.core.files import cmu
     from zoopraxis.core.body import fit3d
     from zoopraxis.core.priors.proportions import ProportionsPrior
@@ -677,9 +699,14 @@ def held_out_subjects_cases(table, rng, n):
                                              pose_prior=prior, proportions=props,
                                              pose_basis=pose_basis, **options)
                     error = 1000 * procrustes_mpjpe(result.joints3d(0), X)
-                    rows.setdefault(label, []).append(error)
                     kind = "Daz figure" if take.skeleton == "cmu_daz" else "own lengths"
+                    rows.setdefault(label, []).append(error)
                     rows.setdefault(f"{label}; {kind}", []).append(error)
+                    if label == variants[0][0]:
+                        right = right_signs_error(result.joints3d(0), X, cams[0])
+                        signs = f"{label}, every depth sign right (oracle)"
+                        rows.setdefault(signs, []).append(right)
+                        rows.setdefault(f"{signs}; {kind}", []).append(right)
         print(f"  fold {'/'.join(fold)} done", file=sys.stderr, flush=True)
     case = "held-out CMU performers, 1 uncalibrated, 1080p @100m"
     for label, values in rows.items():
