@@ -9,7 +9,7 @@ from pathlib import Path
 
 import bpy
 
-from ..core.files.calibfile import read_calibration, write_calibration
+from ..core.files.calibfile import cameras_for_plates, read_calibration, write_calibration
 from ..core.geometry.camera import PinholeCamera
 from ..core.errors import ZoopraxisError
 from . import convert
@@ -70,21 +70,22 @@ def load_calibration(context, filepath, *, report=print):
     Raises
     ------
     ZoopraxisError
-        The file is bad, holds no perspective camera, or a camera's image size disagrees with
-        its view's plate.
+        The file is bad, holds no perspective camera, or a camera's image size is neither its
+        view's plate's nor one the plate can be taken for (``calibfile.camera_for_plate``).
     """
     settings = context.scene.zoopraxis
     cameras = read_calibration(filepath)
     pinholes = {n: c for n, c in cameras.items() if isinstance(c, PinholeCamera)}
     if not pinholes:
         raise ZoopraxisError(f"{filepath}: no perspective camera to show")
-    for name, camera in pinholes.items():
+    sizes = {}
+    for name in pinholes:
         view = settings.view(name)
-        if view is not None and view.clip is not None and tuple(view.clip.size) != \
-                tuple(camera.image_size):
-            raise ZoopraxisError(f"{filepath}: camera '{name}' is {camera.image_size[0]}x"
-                                 f"{camera.image_size[1]} but plate '{name}' is "
-                                 f"{view.clip.size[0]}x{view.clip.size[1]}")
+        if view is not None and view.clip is not None:
+            sizes[name] = tuple(view.clip.size)
+    pinholes, notes = cameras_for_plates(pinholes, sizes, filepath)
+    for note in notes:
+        report(note)
     objects = add_camera_objects(context, pinholes, report=report)
     settings.calibration_path = str(filepath)
     unmatched = [v.name for v in settings.views if v.name not in pinholes]

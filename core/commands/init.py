@@ -8,7 +8,6 @@ from .common import (add_camera_tilt_argument, add_dims_argument, add_flip_argum
                      add_output_arguments,
                      add_perspective_argument, add_pose_prior_arguments, check_output,
                      check_template, parse_init_options)
-from ..errors import ZoopraxisError
 
 
 def build_parser():
@@ -37,7 +36,7 @@ def build_parser():
 
 def main(argv):
     from ..body.body import LENGTH_DIMS
-    from ..files.calibfile import check_views, read_calibration
+    from ..files.calibfile import cameras_for_plates, check_views, read_calibration
     from .calibrate import parse_plate_options
     from .common import open_plates
     from ..initialize.run import initialize_take
@@ -61,12 +60,10 @@ def main(argv):
                   image_sizes={v: p.image_size for v, p in plates.items()})
     if args.calibration:
         cameras = check_views(read_calibration(args.calibration), views, args.calibration)
-        for name, camera in cameras.items():
-            if tuple(camera.image_size) != tuple(plates[name].image_size):
-                raise ZoopraxisError(
-                    f"{args.calibration}: camera '{name}' is {camera.image_size[0]}x"
-                    f"{camera.image_size[1]} but plate '{name}' is {plates[name].image_size[0]}x"
-                    f"{plates[name].image_size[1]}")
+        cameras, notes = cameras_for_plates(
+            cameras, {v: p.image_size for v, p in plates.items()}, args.calibration)
+        for note in notes:
+            print(f"note: {note}")
         for warning in check_calibration(cameras, anchors, args.calibration):
             print(f"warning: {warning}")
     else:

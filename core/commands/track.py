@@ -87,6 +87,10 @@ def main(argv):
     if args.calibration:
         cameras = calibfile.check_views(calibfile.read_calibration(args.calibration),
                                         list(opened), args.calibration)
+        cameras, notes = calibfile.cameras_for_plates(
+            cameras, {v: p.image_size for v, p in opened.items()}, args.calibration)
+        for note in notes:
+            print(f"track: note: {note}", flush=True)
         for warning in check_calibration(cameras, anchors, args.calibration):
             print(f"track: warning: {warning}", flush=True)
     else:

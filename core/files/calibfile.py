@@ -41,6 +41,11 @@ FORMATS = {".json": "calibration.json", ".toml": "Pose2Sim / anipose TOML"}
 TOML_KEYS = ("size", "matrix", "distortions", "rotation", "translation")
 
 
+# A video encoder codes whole blocks of this many pixels, and some tools record that coded size
+# as the image's (Pose2Sim's demo: 1088 rows for 1080-row videos). The rows or columns past the
+# decoded plate's are padding at the bottom or right, so the calibration holds for the plate.
+CODED_BLOCK = 16
+
 # The camera models a calibration.json entry may name in its "model" key.
 CAMERA_MODELS = {cls.model: cls for cls in (PinholeCamera, ScaledOrthoCamera)}
 
@@ -237,3 +242,49 @@ def check_views(cameras, view_names, path):
         raise ZoopraxisError(f"{path}: no camera for view{'s' if len(missing) > 1 else ''} "
                              f"{views} (cameras in the file: {known})")
     return {name: cameras[name] for name in view_names}
+
+
+def camera_for_plate(camera, plate_size, path):
+    """The camera of a view for its plate's size, and what was done to it (None: nothing).
+
+    A calibration made at another size still holds where the plate is the calibrated image
+    scaled (a proxy or an export at half size: the camera is scaled, pixel corners with the
+    image, as ``cv2.resize``) or where the two differ by a video encoder's padding (one size
+    the other rounded up to a multiple of CODED_BLOCK: the camera is kept as it is).
+
+    Raises
+    ------
+    ZoopraxisError
+        Any other size, naming the file, the camera and both sizes.
+    """
+    cw, ch = (int(x) for x in camera.image_size)
+    pw, ph = (int(x) for x in plate_size)
+    if (cw, ch) == (pw, ph):
+        return camera, None
+    said = f"{path}: camera '{camera.name}' is {cw}x{ch} but its plate is {pw}x{ph}"
+
+    def padded(c, p):
+        return c == p or (abs(c - p) < CODED_BLOCK and max(c, p) % CODED_BLOCK == 0)
+
+    if padded(cw, pw) and padded(ch, ph):
+        return camera.replace(image_size=(pw, ph)), \
+            f"{said}: the difference taken for a video encoder's padding, the camera kept"
+    factor = pw / cw
+    if isinstance(camera, PinholeCamera) and round(cw * factor) == pw and \
+            abs(ch * factor - ph) <= 0.5:
+        return camera.scaled(factor, "resize"), \
+            f"{said}: the plate taken for the calibrated image scaled by {factor:.4g}"
+    raise ZoopraxisError(f"{said} (neither the calibrated image scaled nor a video encoder's "
+                         "padding of it)")
+
+
+def cameras_for_plates(cameras, plate_sizes, path):
+    """:func:`camera_for_plate` for every view of ``plate_sizes`` (view name to (w, h)) that
+    has a camera; returns the cameras (the others unchanged) and the notes, one line each."""
+    out, notes = dict(cameras), []
+    for name, size in plate_sizes.items():
+        if name in out:
+            out[name], note = camera_for_plate(out[name], size, path)
+            if note:
+                notes.append(note)
+    return out, notes

@@ -75,6 +75,27 @@ def test_load_plates_and_calibration(blender, tmp_path):
         np.testing.assert_allclose(written[name].project(X), truth[name].project(X), atol=0.01)
 
 
+def test_load_calibration_of_the_footage_at_another_scale(blender, tmp_path):
+    """A calibration of the full-size footage for plates at half its size: the camera objects
+    are the plates' cameras; one of another shape is refused, naming both sizes."""
+    from zoopraxis.addon.calibration import cameras_from_scene
+    from zoopraxis.core.files.calibfile import read_calibration, write_calibration
+
+    settings = load_sample()
+    truth = read_calibration(SAMPLE / "calibration.json")
+    wrong = tmp_path / "wrong.json"
+    write_calibration(wrong, [c.replace(image_size=(480, 400)) for c in truth.values()])
+    with pytest.raises(RuntimeError, match="camera 'cam0' is 480x400 but its plate is 480x360"):
+        bpy.ops.zoopraxis.load_calibration(filepath=str(wrong))
+    assert all(v.camera is None for v in settings.views)
+    double = tmp_path / "double.json"
+    write_calibration(double, [c.scaled(2.0, "resize") for c in truth.values()])
+    bpy.ops.zoopraxis.load_calibration(filepath=str(double))
+    X = np.random.default_rng(7).uniform([-1, -1, 0], [1, 1, 2], (40, 3))
+    for name, camera in cameras_from_scene(blender).items():
+        assert tuple(camera.image_size) == (480, 360)
+        np.testing.assert_allclose(camera.project(X), truth[name].project(X), atol=0.01)
+
 def test_unreadable_plate_and_unequal_lengths_leave_scene_alone(blender, tmp_path):
     bad = tmp_path / "bad"
     bad.mkdir()

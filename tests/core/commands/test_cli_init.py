@@ -291,3 +291,34 @@ def test_prior_command_reads_every_cmu_convention(shared_data):
     more = shared_data / "cmu_more"
     assert read_take_joints(more / "asf_amc" / "35_01.amc").shape == (90, 17, 3)
     assert read_take_joints(more / "bvh_daz" / "60_10.bvh").shape == (599, 17, 3)
+
+
+def test_init_command_takes_a_calibration_made_at_another_scale(tmp_path, capsys):
+    """Plates at half the calibrated size (the calibration of full-size footage, the plates an
+    export at half size): the cameras are scaled to the plates, with a note, and the fit is
+    the one of the plates' own calibration; a calibration of another shape is refused."""
+    from zoopraxis.core.files.calibfile import read_calibration, write_calibration
+
+    root = cli.__file__.replace("cli.py", "samples/walk3/")
+    cameras = read_calibration(root + "calibration.json")
+    double = tmp_path / "double.json"
+    write_calibration(double, [c.scaled(2.0, "resize") for c in cameras.values()])
+    plates = [f"--plate=cam{i}={root}cam{i}" for i in range(3)]
+    outs = {}
+    for name, calibration in (("own", root + "calibration.json"), ("double", str(double))):
+        outs[name] = tmp_path / f"init_{name}.json"
+        assert cli.main(["init", "--markers", root + "markers.json", "--calibration",
+                         calibration, "--out", str(outs[name])] + plates) == 0
+        printed = capsys.readouterr().out
+        assert ("note: " in printed) == (name == "double")
+    assert "camera 'cam0' is 960x720 but its plate is 480x360" in printed
+    assert "scaled by 0.5" in printed
+    own, scaled = (json.loads(outs[n].read_text()) for n in ("own", "double"))
+    assert all(scaled["dims"][n] == pytest.approx(own["dims"][n], abs=1e-4)
+               for n in bm.LENGTH_DIMS)
+    wrong = tmp_path / "wrong.json"
+    write_calibration(wrong, [c.replace(image_size=(480, 400)) for c in cameras.values()])
+    assert cli.main(["init", "--markers", root + "markers.json", "--calibration", str(wrong),
+                     "--out", str(tmp_path / "w.json")] + plates) == 2
+    assert f"{wrong}: camera 'cam0' is 480x400 but its plate is 480x360" in \
+        capsys.readouterr().err

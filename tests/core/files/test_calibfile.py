@@ -7,8 +7,9 @@ import cv2
 import numpy as np
 import pytest
 
-from zoopraxis.core.files.calibfile import (camera_from_dict, check_views, read_calibration,
-                                             write_calibration)
+from zoopraxis.core.files.calibfile import (camera_for_plate, camera_from_dict,
+                                             cameras_for_plates, check_views,
+                                             read_calibration, write_calibration)
 from zoopraxis.core.geometry.camera import PinholeCamera, look_at
 from zoopraxis.core.geometry.ortho import ScaledOrthoCamera
 from zoopraxis.core.errors import ZoopraxisError
@@ -230,3 +231,48 @@ K_OK = [[100.0, 0, 50], [0, 100.0, 40], [0, 0, 1]]
 def test_camera_from_dict_bad_input(entry, message):
     with pytest.raises(ZoopraxisError, match=message):
         camera_from_dict(entry, "calib.json")
+
+
+def _hd_camera(size=(1920, 1080)):
+    R, t = look_at([0.3, -4.0, 1.5], [0.0, 0.0, 1.0])
+    w, h = size
+    return PinholeCamera("cam0", size, [[1500.0, 0, (w - 1) / 2 + 7], [0, 1490.0, (h - 1) / 2 - 5],
+                                        [0, 0, 1]], LENS, R, t)
+
+
+def test_a_plate_at_another_scale_gets_the_calibration_scaled():
+    """A plate exported at half the calibrated size (a proxy): the camera for it projects
+    every point where the calibrated one does, scaled with the image's pixel corners."""
+    camera = _hd_camera()
+    X = np.random.default_rng(0).normal([0, 0, 1], 0.5, (20, 3))
+    half, note = camera_for_plate(camera, (960, 540), "calib.toml")
+    assert tuple(half.image_size) == (960, 540)
+    assert np.allclose(half.project(X), (camera.project(X) + 0.5) * 0.5 - 0.5, atol=1e-9)
+    assert "calib.toml: camera 'cam0' is 1920x1080 but its plate is 960x540" in note
+    assert "scaled by 0.5" in note
+    same, none = camera_for_plate(camera, (1920, 1080), "calib.toml")
+    assert same is camera and none is None
+
+
+def test_a_video_encoders_padding_keeps_the_camera():
+    """Pose2Sim's demo calibrates 1088x1920 for videos that decode at 1080x1920: the rows past
+    the plate's are the encoder's padding at the bottom, the camera holds as it is."""
+    camera = _hd_camera((1088, 1920))
+    plate, note = camera_for_plate(camera, (1080, 1920), "Calib.toml")
+    assert tuple(plate.image_size) == (1080, 1920)
+    assert np.array_equal(plate.K, camera.K) and np.array_equal(plate.R, camera.R)
+    assert "padding" in note and "1088x1920 but its plate is 1080x1920" in note
+
+
+@pytest.mark.parametrize("plate", [(1280, 1024), (1920, 1000), (1900, 1080), (1080, 1920)])
+def test_a_plate_of_another_shape_is_refused_naming_both_sizes(plate):
+    with pytest.raises(ZoopraxisError, match=re.escape(
+            f"calib.json: camera 'cam0' is 1920x1080 but its plate is {plate[0]}x{plate[1]}")):
+        camera_for_plate(_hd_camera(), plate, "calib.json")
+
+
+def test_cameras_for_plates_leaves_views_without_a_plate_alone():
+    cameras = {"cam0": _hd_camera(), "cam1": _hd_camera().replace(name="cam1")}
+    out, notes = cameras_for_plates(cameras, {"cam0": (960, 540)}, "c.json")
+    assert tuple(out["cam0"].image_size) == (960, 540) and out["cam1"] is cameras["cam1"]
+    assert len(notes) == 1 and "cam0" in notes[0]
