@@ -13,6 +13,17 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 
 
+def load_benchmark(name):
+    """The module of the benchmark script ``benchmarks/NAME.py`` (not a package: loaded from
+    its file)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(name, REPO / "benchmarks" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
 def shared_data_dir():
     """The workplace's shared data folder (``../shared/data`` beside the clone), or None."""
     env = os.environ.get("ZOOPRAXIS_SHARED_DATA")

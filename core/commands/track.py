@@ -81,22 +81,21 @@ def main(argv):
     n = plates.check_same_length(opened, offsets)
     frames = plates.parse_frame_range(args.frames, n)
     anchors = markers.read_markers(args.markers)
-    markers.check_markers(anchors, list(opened), n, path=args.markers,
-                          image_sizes={v: p.image_size for v, p in opened.items()})
+    sizes = {v: p.image_size for v, p in opened.items()}
+    markers.check_markers(anchors, list(opened), n, path=args.markers, image_sizes=sizes)
     cameras = None
     if args.calibration:
         cameras = calibfile.check_views(calibfile.read_calibration(args.calibration),
                                         list(opened), args.calibration)
         cameras, notes = calibfile.cameras_for_plates(
-            cameras, {v: p.image_size for v, p in opened.items()}, args.calibration)
+            cameras, sizes, args.calibration)
         for note in notes:
             print(f"track: note: {note}", flush=True)
         for warning in check_calibration(cameras, anchors, args.calibration):
             print(f"track: warning: {warning}", flush=True)
     else:
         anchors = _placeable_views(opened, offsets, anchors, n, args.markers)
-    for warning in check_working_size(anchors, {v: p.image_size for v, p in opened.items()},
-                                      args.max_size):
+    for warning in check_working_size(anchors, sizes, args.max_size):
         print(f"track: warning: {warning}", flush=True)
     if args.workers < 0:
         raise ZoopraxisError(f"--workers {args.workers}: give 0 (one per core) or more")

@@ -1,23 +1,13 @@
 """The one-view oracle of the initialization benchmark (benchmarks/bench_initialize.py): a fit
 whose only fault is a limb's depth sign counts as right, any other fault does not."""
 
-import importlib.util
-
 import numpy as np
 
-from conftest import REPO
-
-
-def _bench():
-    spec = importlib.util.spec_from_file_location("bench_initialize",
-                                                  REPO / "benchmarks" / "bench_initialize.py")
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
-    return bench
+from conftest import load_benchmark
 
 
 def test_right_signs_error_forgives_a_limb_turned_to_its_other_depth_only():
-    bench = _bench()
+    bench = load_benchmark("bench_initialize")
     from zoopraxis.core.body.joints import JOINT_INDEX
     from zoopraxis.core.body.kinematics import kinematics
 

@@ -1,18 +1,9 @@
 """The realistic benchmark's repeated runs with other click noise (benchmarks/bench_realistic.py)."""
 
-import importlib.util
 import subprocess
 import sys
 
-from conftest import REPO
-
-
-def _bench():
-    spec = importlib.util.spec_from_file_location("bench_realistic",
-                                                  REPO / "benchmarks" / "bench_realistic.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+from conftest import load_benchmark
 
 
 def test_other_click_seeds_reach_run_set(tmp_path):
@@ -27,14 +18,14 @@ def test_other_click_seeds_reach_run_set(tmp_path):
         "    a = ap.parse_args()\n"
         "    print(a.set, write_inputs(None, None, None, 2.0, 0, False))\n"
         "    return 0\n")
-    bench = _bench()
+    bench = load_benchmark("bench_realistic")
     out = subprocess.run([sys.executable, "-c", bench.WITH_SEED, str(tmp_path), "11",
                           "--set", "walk"], capture_output=True, text=True, check=True)
     assert out.stdout.split() == ["walk", "11"]
 
 
 def test_spread_line_gives_mean_and_range():
-    bench = _bench()
+    bench = load_benchmark("bench_realistic")
     runs = [{"mpjpe": m, "pa": m - 5, "lost": lost, "knee": 6.0, "elbow": 20.0, "fps": 3.0}
             for m, lost in ((30.0, 0), (50.0, 4), (40.0, 2))]
     line = bench.spread_line("punch02", "default", runs)
@@ -51,7 +42,7 @@ def test_each_set_is_tracked_with_a_prior_that_has_not_seen_its_performer(tmp_pa
 
     from zoopraxis.core.priors.proportions import ProportionsPrior
 
-    bench = _bench()
+    bench = load_benchmark("bench_realistic")
     shipped = set(ProportionsPrior.load().subjects)
     assert "131" in shipped
     walk, salsa, unnamed = (tmp_path / n for n in ("walk", "salsa", "unnamed"))

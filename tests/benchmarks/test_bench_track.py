@@ -1,18 +1,14 @@
 """The synthetic tracking benchmark's options reach ``track`` (benchmarks/bench_track.py)."""
 
-import importlib.util
 import inspect
 
-from conftest import REPO
+from conftest import load_benchmark
 
 
 def test_case_options_are_track_arguments():
     # walk1-near once passed perspective=True, which track() no longer takes (the perspective
     # is an initialization option now): the case failed with a TypeError after rendering.
-    spec = importlib.util.spec_from_file_location("bench_track",
-                                                  REPO / "benchmarks" / "bench_track.py")
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
+    bench = load_benchmark("bench_track")
     from zoopraxis.core.take import track as T
 
     params = inspect.signature(T.track).parameters
