@@ -8,7 +8,7 @@ from ..geometry import se3
 from ..geometry.triangulate import similarity_from_points, triangulate
 from .fit import _Fit
 from .problem import DIMS_RANGE, _fit, _State
-from .starts import _TORSO, _fit_3d, _fit_limbs_3d, _image_scale, _rot_z
+from .starts import _TORSO, _fit_3d, _image_scale, _poses_on_points, _rot_z
 
 
 class _CalibratedFit(_Fit):
@@ -42,9 +42,14 @@ class _CalibratedFit(_Fit):
             # Clicked bodies differ in size: start the lengths at the trunk's (when fitted).
             scale = float(np.clip(scale, *DIMS_RANGE)) if self.fit_dims else 1.0
             dims = self.dims0 * scale
-            root, angles, _ = _fit_3d(kin, X, dims, se3.transform(R, t), angles0)
-            angles = _fit_limbs_3d(kin, X, dims, root, angles)
-            return self._state(root, angles, dims, scale)
+            states = [self._state(root, angles, dims, scale) for root, angles in
+                      _poses_on_points(kin, X, dims, se3.transform(R, t), angles0)]
+            if len(states) == 1:
+                return states[0]
+            obs, w = self.obs[f:f + 1], self.weights[f:f + 1]
+            fits = [_fit(kin, obs, w, state, **self.options(state, f, fit_dims=self.fit_dims))
+                    for state in states]
+            return min(fits, key=lambda fit: fit[1])[0]
         return self._multistart(f, angles0, Y_rest)
 
     def _multistart(self, f, angles0, Y_rest):
