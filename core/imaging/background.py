@@ -193,7 +193,7 @@ def _agreement(samples, free, tol2):
     return agree
 
 
-def estimate_background(frames, *, tolerance=None, exclude=(), masks=None):
+def estimate_background(frames, *, tolerance=None, exclude=(), masks=None, shown=(), times=None):
     """Background of a static view from frames spread over the take.
 
     A per-pixel median fails where the person lingers for more than half the frames (a slow
@@ -215,6 +215,16 @@ def estimate_background(frames, *, tolerance=None, exclude=(), masks=None):
         Where the person is in each of ``frames`` (a tracked body's silhouettes): those
         samples are never taken for the background, so that a person who stood still for
         much of the take is not.
+    shown : sequence of (image, mask, time)
+        Frames where the person is known to be inside ``mask`` (an anchor frame's silhouette,
+        widened): outside it the frame shows the background. Where that colour is seen again
+        far from ``time`` (a quarter of the take or more away, in at least an eighth of the
+        samples), it is the background, however many samples agree on another colour: a
+        performer who stood still elsewhere for most of the take is not taken for it (a kick
+        held in a lunge), nor the floor beside them. Near ``time`` alone it may be the
+        person's own shadow or reflection, and the most consistent colour is kept.
+    times : sequence of float, optional
+        The take's frame numbers of ``frames`` (needed with ``shown``).
 
     Returns
     -------
@@ -250,11 +260,34 @@ def estimate_background(frames, *, tolerance=None, exclude=(), masks=None):
         better = count > best_count
         best_count[better] = count[better]
         best_index[better] = i
+    # the samples of the frames that show the background outside the person (index N + k)
+    references, taken = [], np.zeros(small.shape[1:3], bool)
+    if shown:
+        if times is None:
+            raise ValueError("estimate_background: 'shown' needs the frames' 'times'")
+        times = np.asarray(times, float)
+        span = max(float(np.ptp(times)), 1.0)
+        for image, mask, time in shown:
+            ref = _as_float(image)
+            ref_s = cv2.pyrDown(ref)
+            outside = cv2.resize((~np.asarray(mask, bool)).astype(np.uint8),
+                                 (small.shape[2], small.shape[1]),
+                                 interpolation=cv2.INTER_NEAREST) > 0
+            far = np.abs(times - time) >= span / 4
+            seen_far = ((dist2(small[far], ref_s) < tol2) & ~person_s[far]).sum(axis=0)
+            chosen = outside & ~taken & (seen_far >= max(2, N // 8))
+            best_index[chosen] = N + len(references)
+            best_count[chosen] = ((dist2(small, ref_s) < tol2) & ~person_s).sum(axis=0)[chosen]
+            taken |= chosen
+            references.append(ref)
     index = cv2.resize(best_index.astype(np.float32), (W, H),
                        interpolation=cv2.INTER_NEAREST).astype(np.int64)
     count_full = cv2.resize(best_count.astype(np.float32), (W, H),
                             interpolation=cv2.INTER_NEAREST)
-    centre = np.take_along_axis(stack, index[None, :, :, None], axis=0)[0]
+    centre = np.take_along_axis(stack, np.minimum(index, N - 1)[None, :, :, None], axis=0)[0]
+    for k, ref in enumerate(references):
+        at = index == N + k
+        centre[at] = ref[at]
     close = (dist2(stack, centre) < tol2) & ~person
     n_close = close.sum(axis=0)
     best_sum = np.where((n_close > 0)[..., None],

@@ -14,6 +14,11 @@ from ..imaging.background import estimate_background, model_coverage, silhouette
 from ..trackers.frames import thread_pool
 from .status import MIN_ANCHOR_FIT, silhouette_measures, unexplained_fraction
 
+# How far beyond the model's silhouette at an anchor frame (a fraction of its height) the
+# frame is taken to show the background: clothes and hair wider than the model stay inside.
+SHOWN_MARGIN = 0.1
+
+
 def take_backgrounds(tracker, source, views, frames, inside, state_at, log):
     """Background model per view, whether to use it, and the first anchor's silhouette fit,
     overlap and unexplained foreground (the references for the frames' status).
@@ -30,14 +35,17 @@ def take_backgrounds(tracker, source, views, frames, inside, state_at, log):
             per_view[c].append(img)
     exclude = [[] for _ in views]
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (9, 9))
-    for a in inside:
-        renders_a = tracker.render_views(state_at(a.frame), want=())
-        for c, img in enumerate(source.colour(a.frame)):
+    anchor_renders = [(a.frame, tracker.render_views(state_at(a.frame), want=()))
+                      for a in inside]
+    for frame, renders_a in anchor_renders:
+        for c, img in enumerate(source.colour(frame)):
             mask = cv2.dilate((renders_a[c].label >= 0).astype(np.uint8), kernel) > 0
             exclude[c].append((img, mask))
+    shown = anchors_shown(source, anchor_renders, len(views))
     # one view per thread: the estimate is whole-image numpy and OpenCV work, outside the GIL
     backgrounds = list(thread_pool("views", 2).map(
-        lambda c: estimate_background(per_view[c], exclude=exclude[c])
+        lambda c: estimate_background(per_view[c], exclude=exclude[c], shown=shown[c],
+                                      times=sample)
         if len(per_view[c]) >= 5 else None, range(len(views))))
     use_bg = [bg is not None for bg in backgrounds]
     a0 = inside[0].frame
@@ -70,13 +78,31 @@ def take_backgrounds(tracker, source, views, frames, inside, state_at, log):
     return backgrounds, use_bg, ref_fit, ref_iou, ref_unexplained
 
 
+def anchors_shown(source, anchors, n_views):
+    """Per view, the anchor frames' ``(image, mask, frame)`` for
+    :func:`~zoopraxis.core.imaging.background.estimate_background`'s ``shown``: outside the
+    model's silhouette widened by ``SHOWN_MARGIN`` of its height, an anchor frame shows the
+    background. ``anchors``: ``(frame, renders)`` of the model at each anchor."""
+    shown = [[] for _ in range(n_views)]
+    for frame, renders in anchors:
+        for c, img in enumerate(source.colour(frame)):
+            body = renders[c].label >= 0
+            rows = np.flatnonzero(body.any(axis=1))
+            if not len(rows):
+                continue
+            r = max(4, int(round(SHOWN_MARGIN * (rows[-1] - rows[0] + 1))))
+            kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
+            shown[c].append((img, cv2.dilate(body.astype(np.uint8), kernel) > 0, frame))
+    return shown
+
+
 def sample_frames(frames):
     """The frames spread over the take that the background models are estimated from."""
     return np.unique(np.linspace(frames.start, frames.stop - 1,
                                  min(25, len(frames))).astype(int))
 
 
-def tracked_backgrounds(tracker, source, views, frames, states, use_bg):
+def tracked_backgrounds(tracker, source, views, frames, states, use_bg, anchors=()):
     """Background models estimated again with the tracked body kept out of them.
 
     The first estimate knows where the person is at the anchor frames only; a person who
@@ -90,13 +116,15 @@ def tracked_backgrounds(tracker, source, views, frames, states, use_bg):
         Per view; None where the view's background is not used.
     """
     sample = [int(f) for f in sample_frames(frames) if int(f) in states]
+    shown = anchors_shown(source, [(a, tracker.render_views(states[a], want=()))
+                                   for a in anchors if a in states], len(views))
     return backgrounds_without_body(
         source, sample,
         lambda f: [r.label >= 0 for r in tracker.render_views(states[f], want=())],
-        [u and len(sample) >= 5 for u in use_bg])
+        [u and len(sample) >= 5 for u in use_bg], shown=shown)
 
 
-def backgrounds_without_body(source, frames, silhouettes, wanted, margin=9):
+def backgrounds_without_body(source, frames, silhouettes, wanted, margin=9, shown=None):
     """Each view's background from ``frames``, with where the body is in each frame kept out.
 
     Parameters
@@ -107,6 +135,9 @@ def backgrounds_without_body(source, frames, silhouettes, wanted, margin=9):
         The body's silhouette in each view at a frame (dilated here by ``margin`` pixels).
     wanted : list of bool
         Per view: estimate it (else None).
+    shown : list of list, optional
+        Per view, the anchor frames that show the background outside the body
+        (:func:`anchors_shown`).
 
     Returns
     -------
@@ -120,7 +151,8 @@ def backgrounds_without_body(source, frames, silhouettes, wanted, margin=9):
             per_view[c].append(img)
             masks[c].append(cv2.dilate(body.astype(np.uint8), kernel) > 0)
     return list(thread_pool("views", 2).map(
-        lambda c: estimate_background(per_view[c], masks=np.stack(masks[c]))
+        lambda c: estimate_background(per_view[c], masks=np.stack(masks[c]),
+                                      shown=shown[c] if shown else (), times=frames)
         if wanted[c] else None, range(len(wanted))))
 
 

@@ -467,7 +467,8 @@ def run_take(stepper, plates, cameras, init, views, offsets, frames, inside, *, 
     if cancelled:
         log("cancelled: keeping the frames tracked so far")
     elif rounds == 2:
-        refined = tracked_backgrounds(tracker, source, views, frames, states, use_bg)
+        refined = tracked_backgrounds(tracker, source, views, frames, states, use_bg,
+                                      anchor_frames)
         log("background: estimated again with the tracked body kept out of it; tracking again")
         first = states, reports
         backgrounds = [r if r is not None else b for r, b in zip(refined, backgrounds)]
@@ -488,7 +489,8 @@ def run_take(stepper, plates, cameras, init, views, offsets, frames, inside, *, 
         # each frame's status against backgrounds with the tracked body kept out of them
         ref_fit, ref_iou, ref_unexplained = remeasure(
             tracker, source, states, reports, anchor_frames,
-            tracked_backgrounds(tracker, source, views, frames, states, use_bg), use_bg,
+            tracked_backgrounds(tracker, source, views, frames, states, use_bg, anchor_frames),
+            use_bg,
             limbs=calibrated)
 
     result = make_result(body, views, plates, factors, states, reports, calibrated, init,

@@ -147,3 +147,58 @@ def test_tracked_masks_keep_a_person_who_stood_still_out_of_the_background():
     assert np.abs(tracked.image[still] - truth).max(axis=1).mean() < 0.03
     assert tracked.foreground(frames[6])[still].mean() > 0.9
     assert plain.foreground(frames[6])[still].mean() < 0.2
+
+
+def _still_after_the_anchor(rng, shadow=False):
+    """A person at x=4 in the anchor frame 0, then still at x=25 for frames 3-11 of 15 (the
+    background behind them seen in frames 0-2 and 12-14); with ``shadow``, a dark patch beside
+    the anchor's person (x=18-24) in frames 0-3 only."""
+    W, H = 64, 48
+    back = rng.integers(40, 256, (H, W, 3)).astype(np.uint8)
+    person = rng.integers(0, 256, (30, 14, 3)).astype(np.uint8)
+    frames, masks = [], []
+    for f in range(15):
+        frame = np.clip(back + rng.normal(0, 2, back.shape), 0, 255).astype(np.uint8)
+        mask = np.zeros((H, W), bool)
+        x = 4 if f < 3 else 25 if f < 12 else 45
+        mask[10:40, x:x + 14] = True
+        frame[mask] = person.reshape(-1, 3)
+        if shadow and f <= 3:
+            frame[30:40, 18:24] = (frame[30:40, 18:24] * 0.5).astype(np.uint8)
+        frames.append(frame)
+        masks.append(mask)
+    return back, frames, masks
+
+
+def test_an_anchor_frame_shows_the_background_beside_the_person():
+    """A person who stood still elsewhere for most of the take is the most consistent colour
+    there; the anchor frame, which shows the background there, gives it back when the same
+    colour is seen again far from it."""
+    back, frames, masks = _still_after_the_anchor(np.random.default_rng(7))
+    still = np.zeros(masks[0].shape, bool)
+    still[10:40, 25:39] = True
+    truth = back[still].astype(float) / 255
+    anchor = np.zeros(masks[0].shape, bool)
+    anchor[8:42, 2:20] = True                      # the model's silhouette, widened
+    times = np.arange(15)
+    plain = bg.estimate_background(frames, exclude=[(frames[0], masks[0])])
+    shown = bg.estimate_background(frames, exclude=[(frames[0], masks[0])],
+                                   shown=[(frames[0], anchor, 0)], times=times)
+    assert np.abs(plain.image[still] - truth).max(axis=1).mean() > 0.2
+    assert np.abs(shown.image[still] - truth).max(axis=1).mean() < 0.03
+    assert shown.foreground(frames[6])[still].mean() > 0.9
+    # inside the anchor's silhouette, and where the anchor's colour is not seen again far
+    # from it, nothing changes
+    np.testing.assert_array_equal(shown.image[anchor], plain.image[anchor])
+
+
+def test_what_only_the_anchors_time_shows_is_not_taken_for_background():
+    """A shadow beside the anchor's person, gone a few frames later, is seen near the anchor
+    only: the background stays the floor without it."""
+    back, frames, masks = _still_after_the_anchor(np.random.default_rng(8), shadow=True)
+    anchor = np.zeros(masks[0].shape, bool)
+    anchor[8:42, 2:17] = True
+    shown = bg.estimate_background(frames, exclude=[(frames[0], masks[0])],
+                                   shown=[(frames[0], anchor, 0)], times=np.arange(15))
+    patch = back[30:40, 18:24].astype(float) / 255
+    assert np.abs(shown.image[30:40, 18:24] - patch).max(axis=-1).mean() < 0.03

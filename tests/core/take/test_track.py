@@ -557,3 +557,44 @@ def test_tracked_backgrounds_keep_the_body_out(take):
     assert (wrong_first & covered & first[0].known).sum() > 0.1 * covered.sum()
     assert (wrong_refined & covered & refined[0].known).sum() \
         < 0.3 * (wrong_first & covered & first[0].known).sum()
+
+
+def test_first_backgrounds_see_a_body_that_stood_still_away_from_its_anchor(shared_data):
+    """The body at one place at the anchor frame, then still 0.7 m away for most of the take
+    (a step into a lunge held): the most consistent colour there is the body's own, but the
+    anchor frame shows the background there, seen again at the end of the take; the first
+    backgrounds see the standing body as foreground."""
+    from zoopraxis.core.files import cmu
+    from zoopraxis.core.trackers.differential import DifferentialTracker, State
+
+    motion = cmu.load_cmu(shared_data / "cmu_mocap" / "131_02.bvh", fps=30.0)
+    n = 12
+    sel = np.full(n, 200)
+    joints = cmu.standard_joints(motion, frames=sel)
+    jframes = cmu.standard_joint_frames(motion, frames=sel)
+    shift = np.zeros((n, 3))
+    shift[2:10, 0] = 0.7                     # still at +0.7 m in frames 2-9
+    shift[10:, 0] = 1.4                      # and on again
+    joints = joints + shift[:, None, :]
+    jframes = jframes.copy()
+    jframes[..., :3, 3] += shift[:, None, :]
+    scene = synth.make_scene(joints, jframes, views=2, image_size=(320, 240), noise=1.0,
+                             clutter=4)
+    body, poses, _ = fit3d.fit_sequence(joints)
+    cams = list(scene.cameras)
+    views = [c.name for c in cams]
+    source = DR.FrameSource(synth.scene_plates(scene), views, {}, dict.fromkeys(views, 1.0))
+    tracker = DifferentialTracker(body, True)
+
+    def state_at(f):
+        return State(np.stack([poses[f].root] * len(cams)), poses[f].angles.copy(), cams)
+
+    backgrounds, use_bg, *_ = BG.take_backgrounds(
+        tracker, source, views, range(n), anchors_at(scene, joints, [0]), state_at,
+        lambda message: None)
+    for c in range(len(cams)):
+        assert use_bg[c]
+        body_at_5 = tracker.render_views(state_at(5))[c].label >= 0
+        away = body_at_5 & ~(tracker.render_views(state_at(0))[c].label >= 0)
+        seen = backgrounds[c].person(source.colour(5)[c])
+        assert seen[away].mean() > 0.8
