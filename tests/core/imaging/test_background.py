@@ -123,21 +123,32 @@ def test_shadow_is_the_background_dimmed_not_clothes():
     assert person[shadow].mean() < 0.1
 
 
-def test_tracked_masks_keep_a_person_who_stood_still_out_of_the_background():
-    rng = np.random.default_rng(5)
+def _person_over_frames(rng, place, darkest=0, shade=lambda f: False):
+    """15 frames of a textured 64x48 background (values from ``darkest``) with a textured
+    30x14 person at column ``place(f)``; where ``shade(f)``, a patch at x=18-24 is dimmed
+    by half (a shadow). Returns the background and the frames and person masks (uint8)."""
     W, H = 64, 48
-    back = rng.integers(0, 256, (H, W, 3)).astype(np.uint8)
+    back = rng.integers(darkest, 256, (H, W, 3)).astype(np.uint8)
     person = rng.integers(0, 256, (30, 14, 3)).astype(np.uint8)
     frames, masks = [], []
     for f in range(15):
         frame = np.clip(back + rng.normal(0, 2, back.shape), 0, 255).astype(np.uint8)
         mask = np.zeros((H, W), bool)
-        x = 25 if 3 <= f < 12 else 4 + 3 * f % 40      # still for 9 of 15 frames
+        x = place(f)
         mask[10:40, x:x + 14] = True
         frame[mask] = person.reshape(-1, 3)
+        if shade(f):
+            frame[30:40, 18:24] = (frame[30:40, 18:24] * 0.5).astype(np.uint8)
         frames.append(frame)
         masks.append(mask)
-    still = np.zeros((H, W), bool)
+    return back, frames, masks
+
+
+def test_tracked_masks_keep_a_person_who_stood_still_out_of_the_background():
+    # still for 9 of 15 frames
+    back, frames, masks = _person_over_frames(
+        np.random.default_rng(5), lambda f: 25 if 3 <= f < 12 else 4 + 3 * f % 40)
+    still = np.zeros(masks[0].shape, bool)
     still[10:40, 25:39] = True
     truth = back[still].astype(float) / 255
     plain = bg.estimate_background(frames)
@@ -153,21 +164,8 @@ def _still_after_the_anchor(rng, shadow=False):
     """A person at x=4 in the anchor frame 0, then still at x=25 for frames 3-11 of 15 (the
     background behind them seen in frames 0-2 and 12-14); with ``shadow``, a dark patch beside
     the anchor's person (x=18-24) in frames 0-3 only."""
-    W, H = 64, 48
-    back = rng.integers(40, 256, (H, W, 3)).astype(np.uint8)
-    person = rng.integers(0, 256, (30, 14, 3)).astype(np.uint8)
-    frames, masks = [], []
-    for f in range(15):
-        frame = np.clip(back + rng.normal(0, 2, back.shape), 0, 255).astype(np.uint8)
-        mask = np.zeros((H, W), bool)
-        x = 4 if f < 3 else 25 if f < 12 else 45
-        mask[10:40, x:x + 14] = True
-        frame[mask] = person.reshape(-1, 3)
-        if shadow and f <= 3:
-            frame[30:40, 18:24] = (frame[30:40, 18:24] * 0.5).astype(np.uint8)
-        frames.append(frame)
-        masks.append(mask)
-    return back, frames, masks
+    return _person_over_frames(rng, lambda f: 4 if f < 3 else 25 if f < 12 else 45, darkest=40,
+                               shade=lambda f: shadow and f <= 3)
 
 
 def test_an_anchor_frame_shows_the_background_beside_the_person():
