@@ -274,10 +274,10 @@ def estimate_background(frames, *, tolerance=None, exclude=(), masks=None, shown
                                  (small.shape[2], small.shape[1]),
                                  interpolation=cv2.INTER_NEAREST) > 0
             far = np.abs(times - time) >= span / 4
-            seen_far = ((dist2(small[far], ref_s) < tol2) & ~person_s[far]).sum(axis=0)
-            chosen = outside & ~taken & (seen_far >= max(2, N // 8))
+            agrees = (dist2(small, ref_s) < tol2) & ~person_s
+            chosen = outside & ~taken & (agrees[far].sum(axis=0) >= max(2, N // 8))
             best_index[chosen] = N + len(references)
-            best_count[chosen] = ((dist2(small, ref_s) < tol2) & ~person_s).sum(axis=0)[chosen]
+            best_count[chosen] = agrees.sum(axis=0)[chosen]
             taken |= chosen
             references.append(ref)
     index = cv2.resize(best_index.astype(np.float32), (W, H),

@@ -205,15 +205,6 @@ def _fit_limbs_3d(kin, target, dims, root, angles):
     return angles
 
 
-def _ik_miss(kin, target, dims, root, angles):
-    """The 3D starting fit's robust cost (``_fit_3d``'s soft-L1 at 5 cm) of a root and angles
-    against the points ``target`` (17, 3; NaN where unknown)."""
-    Y = kin.forward(angles[None], dims)[0][0] @ root[:3, :3].T + root[:3, 3]
-    seen = np.isfinite(target).all(axis=-1)
-    d = np.linalg.norm(Y[seen] - target[seen], axis=-1) / 0.05
-    return float(np.sum(np.sqrt(1.0 + d ** 2) - 1.0))
-
-
 def _poses_on_points(kin, target, dims, root, angles):
     """Roots and angles that put the body on 3D points (triangulated joints) from a root placed
     on the trunk's points, by two orders of the inverse kinematics (one pose when both agree).

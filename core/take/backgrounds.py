@@ -48,8 +48,7 @@ def take_backgrounds(tracker, source, views, frames, inside, state_at, log):
                                       times=sample)
         if len(per_view[c]) >= 5 else None, range(len(views))))
     use_bg = [bg is not None for bg in backgrounds]
-    a0 = inside[0].frame
-    r0 = tracker.render_views(state_at(a0), want=())
+    a0, r0 = anchor_renders[0]
     colour0 = source.colour(a0)
     ref_fit = np.full(len(views), np.nan)
     ref_iou = np.full(len(views), np.nan)
