@@ -6,6 +6,13 @@ estimated from the plates themselves as each pixel's most consistent colour over
 over the take (the person's moving, textured clothes don't repeat one colour at one pixel, the
 background does), and each frame's foreground is what differs from it by more than the noise.
 
+The performer's own shadow repeats too: where they stood for much of the take, the floor in
+their shadow is the most consistent colour. Estimated again with the tracked body kept out, a
+pixel whose consistent colour is a dimmed copy of another it also shows keeps both, the lit one
+as the background and the shadow as a second colour (``BackgroundModel.shade``); a frame that
+shows either is background there, so neither the shadow nor the lit floor after the performer
+leaves is taken for them.
+
 Convention: images are BGR uint8 or float32 in [0, 1], at the tracker's working resolution.
 """
 
@@ -22,6 +29,14 @@ import numpy as np
 SHADOW_DARKEST, SHADOW_BRIGHTEST = 0.4, 0.95
 SHADOW_CHROMA = 0.06
 SHADOW_TEXTURE = 0.7
+# A cast shadow only takes light away (estimate_background with the tracked body kept out):
+# where a pixel's most consistent colour is a dimmed copy of another colour it also shows
+# consistently, by a brightness factor in this range and with a colour change under
+# ``LIT_CHROMA`` of the dimmed colour's brightness, the brighter is the background and the
+# dimmer its second colour. Shadows in full sun on the rendered benchmark scenes are 0.25-0.4
+# of the lit floor; a darker copy over the whole view (the exposure) is not a shadow.
+LIT_DARKEST, LIT_BRIGHTEST = 0.2, 0.9
+LIT_CHROMA = 0.08
 
 
 @dataclass
@@ -36,17 +51,30 @@ class BackgroundModel:
     known : array of bool, shape (H, W), optional
         Where the background was seen. Elsewhere (the person never left those pixels) the
         foreground mask says "foreground", so that a silhouette cue cannot push the model out.
+    shade : array, shape (H, W, 3) float32, optional
+        A second colour of the background where ``shaded``: the floor in the performer's
+        shadow, where it lay for much of the take (``image`` is the lit floor there). A frame
+        that shows either colour is background.
+    shaded : array of bool, shape (H, W), optional
     """
 
     image: np.ndarray
     sigma: float
     known: np.ndarray = None
+    shade: np.ndarray = None
+    shaded: np.ndarray = None
 
     def difference2(self, frame):
-        """Squared colour distance of a frame from the background, (H, W) float32."""
-        d = cv2.subtract(_as_float(frame), self.image)
-        d = cv2.multiply(d, d)
-        return cv2.transform(d, np.ones((1, 3), np.float32))    # sum over the channels
+        """Squared colour distance of a frame from the background (the nearer of its two
+        colours where it has a ``shade``), (H, W) float32."""
+        frame = _as_float(frame)
+        ones = np.ones((1, 3), np.float32)
+        d = cv2.subtract(frame, self.image)
+        d2 = cv2.transform(cv2.multiply(d, d), ones)      # sum over the channels
+        if self.shaded is not None:
+            e = cv2.subtract(frame, self.shade)
+            np.minimum(d2, cv2.transform(cv2.multiply(e, e), ones), out=d2, where=self.shaded)
+        return d2
 
     def foreground(self, frame, *, k=4.0, min_level=0.06):
         """Foreground mask of a frame, (H, W) bool, cleaned of specks and small holes."""
@@ -193,6 +221,37 @@ def _agreement(samples, free, tol2):
     return agree
 
 
+def _lit_colours(small, centre, agree, free, least):
+    """Which of each pixel's samples (N, H, W, 3) is the lit colour of which its ``centre``
+    (H, W, 3) is a shadow: a sample that is ``free`` and agrees with at least ``least``
+    samples, of which the centre is a dimmed copy (:data:`LIT_DARKEST` to
+    :data:`LIT_BRIGHTEST`, colour change under :data:`LIT_CHROMA`); the one with the most
+    agreement where several are. Each sample is first scaled by its exposure against the
+    centre over the whole view: light that changes everywhere (a camera's exposure, a cloud)
+    is not a shadow.
+
+    Returns
+    -------
+    found : array of bool, shape (H, W)
+    which, count : array of int, shape (H, W)
+        The lit sample and its agreement where ``found``.
+    """
+    cc = np.einsum("hwc,hwc->hw", centre, centre) + np.float32(1e-6)
+    ss = np.einsum("nhwc,nhwc->nhw", small, small) + np.float32(1e-6)
+    cs = np.einsum("nhwc,hwc->nhw", small, centre)
+    gain = np.median(cs / cc, axis=(1, 2))[:, None, None].astype(np.float32)
+    # the centre against the exposure-scaled sample s / gain: factor a, colour left |c - a s|^2
+    a = cs / ss * gain
+    b = a / gain
+    rest2 = cc[None] - 2 * b * cs + b * b * ss
+    lit = ((a > LIT_DARKEST) & (a < LIT_BRIGHTEST) & (rest2 < np.float32(LIT_CHROMA ** 2) * cc)
+           & free & (agree >= least))
+    score = np.where(lit, agree, 0)
+    which = np.argmax(score, axis=0)
+    count = np.take_along_axis(score, which[None], axis=0)[0]
+    return count > 0, which, count
+
+
 def estimate_background(frames, *, tolerance=None, exclude=(), masks=None, shown=(), times=None):
     """Background of a static view from frames spread over the take.
 
@@ -261,7 +320,7 @@ def estimate_background(frames, *, tolerance=None, exclude=(), masks=None, shown
         best_count[better] = count[better]
         best_index[better] = i
     # the samples of the frames that show the background outside the person (index N + k)
-    references, taken = [], np.zeros(small.shape[1:3], bool)
+    references, references_s, taken = [], [], np.zeros(small.shape[1:3], bool)
     if shown:
         if times is None:
             raise ValueError("estimate_background: 'shown' needs the frames' 'times'")
@@ -280,25 +339,55 @@ def estimate_background(frames, *, tolerance=None, exclude=(), masks=None, shown
             best_count[chosen] = agrees.sum(axis=0)[chosen]
             taken |= chosen
             references.append(ref)
-    index = cv2.resize(best_index.astype(np.float32), (W, H),
-                       interpolation=cv2.INTER_NEAREST).astype(np.int64)
+            references_s.append(ref_s)
+    least = max(2, N // 8)
+    shaded_s = None
+    if masks is not None:
+        # With the body kept out, a pixel whose most consistent colour is the performer's
+        # shadow (cast where they stood for much of the take) has the lit floor it also shows
+        # for its background, and the shadow for a second colour (not without the masks: a
+        # performer who stood still shows a lit and a shaded side of their clothes).
+        centre_s = np.take_along_axis(small, np.minimum(best_index, N - 1)[None, :, :, None],
+                                      axis=0)[0]
+        for k, ref_s in enumerate(references_s):
+            at = best_index == N + k
+            centre_s[at] = ref_s[at]
+        shaded_s, which, count = _lit_colours(small, centre_s, agree, ~person_s, least)
+        shade_index = best_index.copy()
+        best_index[shaded_s] = which[shaded_s]
+        best_count[shaded_s] = count[shaded_s]
+    image, n_close = _consistent_colour(stack, person, best_index, references, tol2)
+    image = np.where((n_close > 0)[..., None], image, median).astype(np.float32)
     count_full = cv2.resize(best_count.astype(np.float32), (W, H),
                             interpolation=cv2.INTER_NEAREST)
+    known = np.minimum(n_close, count_full.astype(np.int64)) >= least
+    shade = shaded = None
+    if shaded_s is not None and shaded_s.any():
+        shade, n_shade = _consistent_colour(stack, person, shade_index, references, tol2)
+        shaded = (cv2.resize(shaded_s.astype(np.uint8), (W, H),
+                             interpolation=cv2.INTER_NEAREST) > 0) & (n_shade >= least)
+        shade = np.where(shaded[..., None], shade, image).astype(np.float32)
+    model = BackgroundModel(image, noise, known, shade, shaded)
+    diffs = np.sqrt(np.stack([model.difference2(f) for f in stack[::3]]))[:, known]
+    model.sigma = float(1.4826 * np.median(diffs)) + 1e-3 if diffs.size else noise
+    return model
+
+
+def _consistent_colour(stack, person, index_small, references, tol2):
+    """The mean of each pixel's samples (N, H, W, 3), not ``person``, within ``tol2`` of the
+    sample ``index_small`` names (half resolution; N + k: ``references[k]``), and their
+    count."""
+    N, H, W, _ = stack.shape
+    index = cv2.resize(index_small.astype(np.float32), (W, H),
+                       interpolation=cv2.INTER_NEAREST).astype(np.int64)
     centre = np.take_along_axis(stack, np.minimum(index, N - 1)[None, :, :, None], axis=0)[0]
     for k, ref in enumerate(references):
         at = index == N + k
         centre[at] = ref[at]
-    close = (dist2(stack, centre) < tol2) & ~person
+    close = (_dist2(stack, centre) < tol2) & ~person
     n_close = close.sum(axis=0)
-    best_sum = np.where((n_close > 0)[..., None],
-                        (stack * close[..., None]).sum(axis=0) / np.maximum(n_close, 1)[..., None],
-                        median)
-    best_count = np.minimum(n_close, count_full.astype(np.int64))
-    image = best_sum.astype(np.float32)
-    known = best_count >= max(2, N // 8)
-    diffs = np.sqrt(dist2(stack[::3], image))[:, known]
-    sigma = float(1.4826 * np.median(diffs)) + 1e-3 if diffs.size else noise
-    return BackgroundModel(image, sigma, known)
+    mean = (stack * close[..., None]).sum(axis=0) / np.maximum(n_close, 1)[..., None]
+    return mean, n_close
 
 
 def signed_distance(mask):

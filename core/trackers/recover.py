@@ -13,12 +13,11 @@ distance), and into foreground that the rest of the body, or the limb's own firs
 not already explain (a shank folded behind its thigh explains nothing the thigh does not). A
 knee is folded no further than one frame's reach from where the step left it, straightened any
 amount (``FLEX_SPEED_DEG_S``, at the take's rate: :meth:`LimbSearch.frame_rate`). Drawing is
-done in two rounds (wide, then narrow around the best). An arm that anything could call away is
-first drawn whole and broadly (:meth:`LimbSearch._broad`, unless ``LimbSearch.broad`` is off:
-the first of two tracking rounds): thousands of draws over its range scored on a few points
-each, the best refined on all of them; its stages start from there. Everything is vectorized
-over draws and points. When a limb's best draw clearly beats its current pose, the tracker
-refines from it (:meth:`DifferentialTracker.step` with ``start``).
+done in two rounds (wide, then narrow around the best), after a broad round of the whole limb
+(:meth:`LimbSearch._broad`, unless ``LimbSearch.broad`` is off: the first of two tracking
+rounds): thousands of draws over its range scored on a few points each, the best refined on
+all of them. Everything is vectorized over draws and points. When a limb's best draw clearly
+beats its current pose, the tracker refines from it (:meth:`DifferentialTracker.step`).
 
 On colour plates an arm is also drawn by its hand's colour (``END_BONUS``), and searched when
 its hand is not on that colour (``END_SEEN``), never into the other arm: the one cue that finds
@@ -55,13 +54,14 @@ PROBE_DRAWS = 48        # draws of the quick check before a full search of a fit
 # stage, an arm whose upper arm lies inside the trunk's silhouette cannot be found (every
 # shoulder angle scores alike there), nor by a few draws of the whole limb: the nearest of a
 # thousand uniform draws is still about 70 mm from a given elbow and wrist. The broad round
-# also decides whether a fitting arm is searched.
+# also decides whether a fitting limb is searched. Legs too: in a kick's snap (kick135) the
+# hip's stage scores the thigh with the shank still folded (benchmarks/README.md).
 BROAD_DRAWS = 2048
 BROAD_POINTS = 6
 BROAD_KEEP = 24
 BROAD_LOCAL = 7
 BROAD_WIDTHS = (0.15, 0.05)
-BROAD_KINDS = ("arm",)
+BROAD_KINDS = ("arm", "leg")
 UNEXPLAINED_BONUS = 0.6  # extra credit for foreground that no part of the model covers
 UNEXPLAINED_MIN_PX = 5  # unexplained foreground thinner than this is the build, not a limb
 # Limbs are drawn only to unexplained foreground this many arm widths away from the model's
@@ -746,7 +746,7 @@ class LimbSearch:
             return angles, 0.0
         broad = None
         if self.broad and group.name.endswith(BROAD_KINDS):
-            # The whole arm drawn broadly: a fitting one is searched only when that finds a
+            # The whole limb drawn broadly: a fitting one is searched only when that finds a
             # better pose (only unexplained foreground or its end's colour could call it
             # away); the stages start from the better of the two.
             broad, broad_score = self._broad(roots, angles, group, cameras, sdfs, rest,

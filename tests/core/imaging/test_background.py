@@ -200,3 +200,46 @@ def test_what_only_the_anchors_time_shows_is_not_taken_for_background():
                                    shown=[(frames[0], anchor, 0)], times=np.arange(15))
     patch = back[30:40, 18:24].astype(float) / 255
     assert np.abs(shown.image[30:40, 18:24] - patch).max(axis=-1).mean() < 0.03
+
+
+def test_a_shadow_cast_for_most_of_the_take_is_a_second_colour_of_the_floor():
+    """The performer's shadow lay on a patch for 10 of 15 frames (a crouch before a jump): its
+    dimmed floor is the most consistent colour there. With the body kept out, the lit floor
+    the patch shows in the other frames is the background (a shadow only takes light away)
+    and the shadow its second colour: neither is foreground, and the lit floor is what the
+    shadow test measures against."""
+    back, frames, masks = _person_over_frames(
+        np.random.default_rng(9), lambda f: 40, darkest=60, shade=lambda f: 3 <= f < 13)
+    patch = np.zeros(masks[0].shape, bool)
+    patch[30:40, 18:24] = True
+    lit = back[patch].astype(float) / 255
+    plain = bg.estimate_background(frames)
+    tracked = bg.estimate_background(frames, masks=np.stack(masks))
+    # without the body's masks the shadow stays the background (a still performer's shaded
+    # side would be taken for a shadow too)
+    assert np.abs(plain.image[patch] - lit).max(axis=1).mean() > 0.1
+    assert plain.shaded is None
+    assert np.abs(tracked.image[patch] - lit).max(axis=1).mean() < 0.03
+    assert tracked.shaded[patch].mean() > 0.9 and tracked.shaded.mean() < 0.05
+    np.testing.assert_allclose(tracked.shade[patch], lit * 0.5, atol=0.03)
+    # lit (the anchor's frame 0) or in the shadow, the patch is background
+    assert tracked.foreground(frames[0])[patch].mean() < 0.05
+    assert tracked.foreground(frames[5])[patch].mean() < 0.05
+    # something else over it is not
+    other = frames[5].copy()
+    other[patch] = 255 - other[patch]
+    assert tracked.foreground(other)[patch].mean() > 0.9
+    # a shadow where the floor is lit in most frames is measured against the lit floor
+    assert tracked.shadow(frames[5])[patch].mean() > 0.9
+
+
+def test_a_darker_exposure_over_the_whole_view_is_not_a_shadow():
+    """Two thirds of the frames are darker all over (the camera's exposure): the brighter
+    third is not the lit floor of a shadow, and the background stays the darker frames'."""
+    back, frames, masks = _person_over_frames(np.random.default_rng(10), lambda f: 40,
+                                              darkest=60)
+    frames = [(f * 0.6).astype(np.uint8) if i < 10 else f for i, f in enumerate(frames)]
+    tracked = bg.estimate_background(frames, masks=np.stack(masks))
+    free = ~masks[0]
+    assert tracked.foreground(frames[5])[free].mean() < 0.05
+    np.testing.assert_allclose(tracked.image[free], frames[5][free] / 255, atol=0.04)
