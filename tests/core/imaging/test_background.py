@@ -144,18 +144,30 @@ def _person_over_frames(rng, place, darkest=0, shade=lambda f: False):
     return back, frames, masks
 
 
+def _off(model, where, truth):
+    """Mean over the pixels ``where`` of the background's largest channel error from
+    ``truth`` (their colours, 0-1)."""
+    return np.abs(model.image[where] - truth).max(axis=1).mean()
+
+
+def _estimates(seed, place, box, **kw):
+    """:func:`_person_over_frames` and its backgrounds without and with the body's masks:
+    ``frames, region, truth, plain, tracked``, ``region`` the pixels of ``box`` and ``truth``
+    the background's colours there."""
+    back, frames, masks = _person_over_frames(np.random.default_rng(seed), place, **kw)
+    region = np.zeros(masks[0].shape, bool)
+    region[box] = True
+    return (frames, region, back[region].astype(float) / 255, bg.estimate_background(frames),
+            bg.estimate_background(frames, masks=np.stack(masks)))
+
+
 def test_tracked_masks_keep_a_person_who_stood_still_out_of_the_background():
     # still for 9 of 15 frames
-    back, frames, masks = _person_over_frames(
-        np.random.default_rng(5), lambda f: 25 if 3 <= f < 12 else 4 + 3 * f % 40)
-    still = np.zeros(masks[0].shape, bool)
-    still[10:40, 25:39] = True
-    truth = back[still].astype(float) / 255
-    plain = bg.estimate_background(frames)
-    tracked = bg.estimate_background(frames, masks=np.stack(masks))
+    frames, still, truth, plain, tracked = _estimates(
+        5, lambda f: 25 if 3 <= f < 12 else 4 + 3 * f % 40, np.s_[10:40, 25:39])
     # the person's own colours win the plain estimate where they stood
-    assert np.abs(plain.image[still] - truth).max(axis=1).mean() > 0.2
-    assert np.abs(tracked.image[still] - truth).max(axis=1).mean() < 0.03
+    assert _off(plain, still, truth) > 0.2
+    assert _off(tracked, still, truth) < 0.03
     assert tracked.foreground(frames[6])[still].mean() > 0.9
     assert plain.foreground(frames[6])[still].mean() < 0.2
 
@@ -182,8 +194,8 @@ def test_an_anchor_frame_shows_the_background_beside_the_person():
     plain = bg.estimate_background(frames, exclude=[(frames[0], masks[0])])
     shown = bg.estimate_background(frames, exclude=[(frames[0], masks[0])],
                                    shown=[(frames[0], anchor, 0)], times=times)
-    assert np.abs(plain.image[still] - truth).max(axis=1).mean() > 0.2
-    assert np.abs(shown.image[still] - truth).max(axis=1).mean() < 0.03
+    assert _off(plain, still, truth) > 0.2
+    assert _off(shown, still, truth) < 0.03
     assert shown.foreground(frames[6])[still].mean() > 0.9
     # inside the anchor's silhouette, and where the anchor's colour is not seen again far
     # from it, nothing changes
@@ -208,18 +220,13 @@ def test_a_shadow_cast_for_most_of_the_take_is_a_second_colour_of_the_floor():
     the patch shows in the other frames is the background (a shadow only takes light away)
     and the shadow its second colour: neither is foreground, and the lit floor is what the
     shadow test measures against."""
-    back, frames, masks = _person_over_frames(
-        np.random.default_rng(9), lambda f: 40, darkest=60, shade=lambda f: 3 <= f < 13)
-    patch = np.zeros(masks[0].shape, bool)
-    patch[30:40, 18:24] = True
-    lit = back[patch].astype(float) / 255
-    plain = bg.estimate_background(frames)
-    tracked = bg.estimate_background(frames, masks=np.stack(masks))
+    frames, patch, lit, plain, tracked = _estimates(
+        9, lambda f: 40, np.s_[30:40, 18:24], darkest=60, shade=lambda f: 3 <= f < 13)
     # without the body's masks the shadow stays the background (a still performer's shaded
     # side would be taken for a shadow too)
-    assert np.abs(plain.image[patch] - lit).max(axis=1).mean() > 0.1
+    assert _off(plain, patch, lit) > 0.1
     assert plain.shaded is None
-    assert np.abs(tracked.image[patch] - lit).max(axis=1).mean() < 0.03
+    assert _off(tracked, patch, lit) < 0.03
     assert tracked.shaded[patch].mean() > 0.9 and tracked.shaded.mean() < 0.05
     np.testing.assert_allclose(tracked.shade[patch], lit * 0.5, atol=0.03)
     # lit (the anchor's frame 0) or in the shadow, the patch is background
