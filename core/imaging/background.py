@@ -56,6 +56,7 @@ class BackgroundModel:
         shadow, where it lay for much of the take (``image`` is the lit floor there). A frame
         that shows either colour is background.
     shaded : array of bool, shape (H, W), optional
+        Where ``shade`` holds (elsewhere it equals ``image``).
     """
 
     image: np.ndarray
