@@ -37,6 +37,8 @@ SHADOW_TEXTURE = 0.7
 # of the lit floor; a darker copy over the whole view (the exposure) is not a shadow.
 LIT_DARKEST, LIT_BRIGHTEST = 0.2, 0.9
 LIT_CHROMA = 0.08
+# ... seen in samples where the tracked body, widened by this share of its height, is away.
+LIT_AWAY = 0.1
 
 
 @dataclass
@@ -222,6 +224,20 @@ def _agreement(samples, free, tol2):
     return agree
 
 
+def _widened(masks, share):
+    """Each mask (N, H, W) dilated by ``share`` of its height (rows spanned), at least a
+    pixel."""
+    out = np.zeros_like(masks)
+    for i, m in enumerate(masks):
+        rows = np.flatnonzero(m.any(axis=1))
+        if not len(rows):
+            continue
+        r = max(1, int(round(share * (rows[-1] - rows[0] + 1))))
+        kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
+        out[i] = cv2.dilate(m.astype(np.uint8), kernel) > 0
+    return out
+
+
 def _lit_colours(small, centre, agree, free, least):
     """Which of each pixel's samples (N, H, W, 3) is the lit colour of which its ``centre``
     (H, W, 3) is a shadow: a sample that is ``free`` and agrees with at least ``least``
@@ -353,7 +369,12 @@ def estimate_background(frames, *, tolerance=None, exclude=(), masks=None, shown
         for k, ref_s in enumerate(references_s):
             at = best_index == N + k
             centre_s[at] = ref_s[at]
-        shaded_s, which, count = _lit_colours(small, centre_s, agree, ~person_s, least)
+        # the lit colour is counted only in samples where the body, widened by a share of its
+        # height, is away: clothes lighter than the floor and of its hue, at the edge of a
+        # mask that misses them (or a lost limb held still), are not the lit floor
+        away = ~_widened(person_s, LIT_AWAY)
+        shaded_s, which, count = _lit_colours(small, centre_s, _agreement(small, away, tol2),
+                                              away, least)
         shade_index = best_index.copy()
         best_index[shaded_s] = which[shaded_s]
         best_count[shaded_s] = count[shaded_s]
