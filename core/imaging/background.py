@@ -208,34 +208,33 @@ def _dist2(a, b):
     return np.einsum("...c,...c->...", d, d)
 
 
-def _agreement(samples, free, tol2):
+def _agreement(samples, frees, tol2):
     """For each sample (N, H, W, 3) of each pixel, how many of the pixel's samples that are
-    ``free`` (N, H, W) lie within squared colour distance ``tol2`` of it (itself included).
+    free (each of ``frees``, (N, H, W) bool) lie within squared colour distance ``tol2`` of it
+    (itself included); one count per mask of ``frees``.
 
     Agreement is symmetric (the distance of a pair is the same either way round, to the bit),
-    so each pair is measured once and counted for both of its samples.
+    so each pair is measured once, for every mask, and counted for both of its samples.
     """
     N = len(samples)
-    agree = np.zeros(samples.shape[:3], np.int64)
+    agrees = [np.zeros(samples.shape[:3], np.int64) for _ in frees]
     for i in range(N):
         close = _dist2(samples[i:], samples[i]) < tol2       # samples i, i+1, ... against i
-        agree[i] += (close & free[i:]).sum(axis=0)
-        agree[i + 1:] += close[1:] & free[i]
-    return agree
+        for agree, free in zip(agrees, frees):
+            agree[i] += (close & free[i:]).sum(axis=0)
+            agree[i + 1:] += close[1:] & free[i]
+    return agrees
 
 
-def _widened(masks, share):
-    """Each mask (N, H, W) dilated by ``share`` of its height (rows spanned), at least a
-    pixel."""
-    out = np.zeros_like(masks)
-    for i, m in enumerate(masks):
-        rows = np.flatnonzero(m.any(axis=1))
-        if not len(rows):
-            continue
-        r = max(1, int(round(share * (rows[-1] - rows[0] + 1))))
-        kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
-        out[i] = cv2.dilate(m.astype(np.uint8), kernel) > 0
-    return out
+def widened(mask, share, least=1):
+    """A body's mask (H, W) dilated by ``share`` of its height (the rows it spans), by at
+    least ``least`` pixels; None for an empty mask."""
+    rows = np.flatnonzero(mask.any(axis=1))
+    if not len(rows):
+        return None
+    r = max(least, int(round(share * (rows[-1] - rows[0] + 1))))
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
+    return cv2.dilate(mask.astype(np.uint8), kernel) > 0
 
 
 def _lit_colours(small, centre, agree, free, least):
@@ -258,8 +257,8 @@ def _lit_colours(small, centre, agree, free, least):
     cs = np.einsum("nhwc,hwc->nhw", small, centre)
     gain = np.median(cs / cc, axis=(1, 2))[:, None, None].astype(np.float32)
     # the centre against the exposure-scaled sample s / gain: factor a, colour left |c - a s|^2
-    a = cs / ss * gain
-    b = a / gain
+    b = cs / ss
+    a = b * gain
     rest2 = cc[None] - 2 * b * cs + b * b * ss
     lit = ((a > LIT_DARKEST) & (a < LIT_BRIGHTEST) & (rest2 < np.float32(LIT_CHROMA ** 2) * cc)
            & free & (agree >= least))
@@ -328,7 +327,17 @@ def estimate_background(frames, *, tolerance=None, exclude=(), masks=None, shown
     if exclude or masks is not None:
         person_s = np.stack([cv2.resize(p.astype(np.uint8), (small.shape[2], small.shape[1]),
                                         interpolation=cv2.INTER_NEAREST) > 0 for p in person])
-    agree = _agreement(small, ~person_s, tol2)
+    least = max(2, N // 8)      # samples that make a colour the background's
+    frees = [~person_s]
+    if masks is not None:
+        # the lit colour of a shadow (below) is counted only in samples where the body,
+        # widened by a share of its height, is away: clothes lighter than the floor and of its
+        # hue, at the edge of a mask that misses them (or a lost limb held still), are not
+        # the lit floor
+        near = [widened(p, LIT_AWAY) for p in person_s]
+        frees.append(~np.stack([p if w is None else w for p, w in zip(person_s, near)]))
+    counts = _agreement(small, frees, tol2)
+    agree = counts[0]
     best_count = np.zeros(small.shape[1:3], np.int32)
     best_index = np.zeros(small.shape[1:3], np.int64)
     for i in range(N):
@@ -351,30 +360,20 @@ def estimate_background(frames, *, tolerance=None, exclude=(), masks=None, shown
                                  interpolation=cv2.INTER_NEAREST) > 0
             far = np.abs(times - time) >= span / 4
             agrees = (dist2(small, ref_s) < tol2) & ~person_s
-            chosen = outside & ~taken & (agrees[far].sum(axis=0) >= max(2, N // 8))
+            chosen = outside & ~taken & (agrees[far].sum(axis=0) >= least)
             best_index[chosen] = N + len(references)
             best_count[chosen] = agrees.sum(axis=0)[chosen]
             taken |= chosen
             references.append(ref)
             references_s.append(ref_s)
-    least = max(2, N // 8)
     shaded_s = None
     if masks is not None:
         # With the body kept out, a pixel whose most consistent colour is the performer's
         # shadow (cast where they stood for much of the take) has the lit floor it also shows
         # for its background, and the shadow for a second colour (not without the masks: a
         # performer who stood still shows a lit and a shaded side of their clothes).
-        centre_s = np.take_along_axis(small, np.minimum(best_index, N - 1)[None, :, :, None],
-                                      axis=0)[0]
-        for k, ref_s in enumerate(references_s):
-            at = best_index == N + k
-            centre_s[at] = ref_s[at]
-        # the lit colour is counted only in samples where the body, widened by a share of its
-        # height, is away: clothes lighter than the floor and of its hue, at the edge of a
-        # mask that misses them (or a lost limb held still), are not the lit floor
-        away = ~_widened(person_s, LIT_AWAY)
-        shaded_s, which, count = _lit_colours(small, centre_s, _agreement(small, away, tol2),
-                                              away, least)
+        shaded_s, which, count = _lit_colours(
+            small, _centre(small, best_index, references_s), counts[1], frees[1], least)
         shade_index = best_index.copy()
         best_index[shaded_s] = which[shaded_s]
         best_count[shaded_s] = count[shaded_s]
@@ -395,6 +394,17 @@ def estimate_background(frames, *, tolerance=None, exclude=(), masks=None, shown
     return model
 
 
+def _centre(samples, index, references):
+    """Each pixel's sample (N, H, W, 3) that ``index`` (H, W) names; N + k: ``references[k]``
+    (H, W, 3)."""
+    N = len(samples)
+    centre = np.take_along_axis(samples, np.minimum(index, N - 1)[None, :, :, None], axis=0)[0]
+    for k, ref in enumerate(references):
+        at = index == N + k
+        centre[at] = ref[at]
+    return centre
+
+
 def _consistent_colour(stack, person, index_small, references, tol2):
     """The mean of each pixel's samples (N, H, W, 3), not ``person``, within ``tol2`` of the
     sample ``index_small`` names (half resolution; N + k: ``references[k]``), and their
@@ -402,11 +412,7 @@ def _consistent_colour(stack, person, index_small, references, tol2):
     N, H, W, _ = stack.shape
     index = cv2.resize(index_small.astype(np.float32), (W, H),
                        interpolation=cv2.INTER_NEAREST).astype(np.int64)
-    centre = np.take_along_axis(stack, np.minimum(index, N - 1)[None, :, :, None], axis=0)[0]
-    for k, ref in enumerate(references):
-        at = index == N + k
-        centre[at] = ref[at]
-    close = (_dist2(stack, centre) < tol2) & ~person
+    close = (_dist2(stack, _centre(stack, index, references)) < tol2) & ~person
     n_close = close.sum(axis=0)
     mean = (stack * close[..., None]).sum(axis=0) / np.maximum(n_close, 1)[..., None]
     return mean, n_close

@@ -10,7 +10,7 @@ estimated again with the tracked body kept out of every sampled frame
 import cv2
 import numpy as np
 
-from ..imaging.background import estimate_background, model_coverage, silhouette_iou
+from ..imaging.background import estimate_background, model_coverage, silhouette_iou, widened
 from ..trackers.frames import thread_pool
 from .status import MIN_ANCHOR_FIT, silhouette_measures, unexplained_fraction
 
@@ -85,13 +85,9 @@ def anchors_shown(source, anchors, n_views):
     shown = [[] for _ in range(n_views)]
     for frame, renders in anchors:
         for c, img in enumerate(source.colour(frame)):
-            body = renders[c].label >= 0
-            rows = np.flatnonzero(body.any(axis=1))
-            if not len(rows):
-                continue
-            r = max(4, int(round(SHOWN_MARGIN * (rows[-1] - rows[0] + 1))))
-            kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
-            shown[c].append((img, cv2.dilate(body.astype(np.uint8), kernel) > 0, frame))
+            body = widened(renders[c].label >= 0, SHOWN_MARGIN, least=4)
+            if body is not None:
+                shown[c].append((img, body, frame))
     return shown
 
 

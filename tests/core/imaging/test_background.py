@@ -29,7 +29,8 @@ def test_agreement_counts_every_pair(n):
     samples = np.stack([bg._as_float(f) for f in frames])
     free = rng.uniform(size=samples.shape[:3]) > 0.2
     tol2 = np.float32(0.03)
-    got = bg._agreement(samples, free, tol2)
+    other = rng.uniform(size=samples.shape[:3]) > 0.5
+    got, got_other = bg._agreement(samples, [free, other], tol2)
     # every pair measured from both ends
     expected = np.zeros(samples.shape[:3], np.int64)
     for i in range(n):
@@ -37,6 +38,8 @@ def test_agreement_counts_every_pair(n):
         close = np.einsum("...c,...c->...", d, d) < tol2
         expected[i] = (close & free).sum(axis=0)
     np.testing.assert_array_equal(got, expected)
+    # a second mask's counts, from the same distances, are its own
+    np.testing.assert_array_equal(got_other, bg._agreement(samples, [other], tol2)[0])
 
 
 def test_estimate_background_finds_the_background_behind_a_mover():
@@ -260,7 +263,7 @@ def test_light_clothes_beside_the_mask_are_not_the_lit_floor(monkeypatch, away):
     the sleeve is not the lit floor, and stays foreground. The control counts it next to the
     mask: the sleeve becomes the background."""
     if not away:
-        monkeypatch.setattr(bg, "_widened", lambda masks, share: masks)
+        monkeypatch.setattr(bg, "widened", lambda mask, share, least=1: mask)
     rng = np.random.default_rng(11)
     H, W = 48, 64
     frames, masks = [], []
